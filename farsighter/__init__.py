@@ -1,0 +1,1 @@
+"""Farsighter: uncertainty-driven multi-step exploration for deep RL."""

@@ -1,0 +1,144 @@
+"""DDQN (paper section 3.2) and k-DDQN (section 5.2 baselines): epsilon-greedy exploration,
+double-Q targets with one-step (k = 1) or k-step returns formed by the replay at sample time."""
+
+from __future__ import annotations
+
+import copy
+from typing import Any
+
+import gymnasium as gym
+import numpy as np
+import torch
+
+from farsighter.agents.common import (
+    batch_tensors,
+    build_seeded,
+    clip_and_step,
+    linear_schedule,
+    make_optimizer,
+    make_replay,
+    obs_tensor,
+    td_loss,
+    updates_due,
+)
+from farsighter.config import Config
+from farsighter.networks import QNetwork
+from farsighter.ops.targets import double_q_target
+
+
+class DDQNAgent:
+    """Q(s, a) = W phi_theta(s); target network copied every N steps (Eq. 2-3)."""
+
+    def __init__(
+        self,
+        cfg: Config,
+        obs_space: gym.spaces.Box,
+        act_space: gym.spaces.Discrete,
+        *,
+        frame_stack: int,
+        device: torch.device,
+    ) -> None:
+        self.cfg = cfg
+        self.device = device
+        self.num_actions = int(act_space.n)
+        self.q = build_seeded(
+            cfg.seed, lambda: QNetwork(obs_space, self.num_actions, cfg.hidden_sizes)
+        ).to(device)
+        self.q_target = copy.deepcopy(self.q)
+        self.q_target.requires_grad_(False)
+        self.opt = make_optimizer(self.q.parameters(), cfg)
+        self.replay = make_replay(cfg, obs_space, frame_stack, seed=cfg.seed + 1)
+        self.rng = np.random.default_rng(cfg.seed + 2)
+        self.updates = 0
+        self.target_syncs = 0
+        self.epsilon = cfg.eps_start
+
+    # ------------------------------------------------------------------ acting
+    def act(self, obs_E: np.ndarray, global_step: int, explore: bool = True) -> np.ndarray:
+        """Epsilon-greedy actions for a batch of environments (greedy when not exploring)."""
+        n = obs_E.shape[0]
+        if not explore:
+            return self.greedy(obs_E)
+        cfg = self.cfg
+        self.epsilon = linear_schedule(cfg.eps_start, cfg.eps_end, cfg.eps_decay_steps, global_step)
+        random_E = self.rng.random(n) < self.epsilon
+        random_actions_E = self.rng.integers(0, self.num_actions, size=n)
+        if random_E.all():  # no forward pass needed
+            return random_actions_E
+        return np.where(random_E, random_actions_E, self.greedy(obs_E))
+
+    @torch.no_grad()
+    def greedy(self, obs_E: np.ndarray) -> np.ndarray:
+        q_EA = self.q(obs_tensor(obs_E, self.device))
+        return q_EA.argmax(dim=1).cpu().numpy()
+
+    def observe(
+        self,
+        obs_E: np.ndarray,
+        action_E: np.ndarray,
+        reward_E: np.ndarray,
+        terminated_E: np.ndarray,
+        truncated_E: np.ndarray,
+        final_obs_E: Any,
+    ) -> None:
+        self.replay.add(obs_E, action_E, reward_E, terminated_E, truncated_E, final_obs_E)
+
+    # ------------------------------------------------------------------ learning
+    def learn(self, global_step: int) -> dict[str, torch.Tensor]:
+        metrics: dict[str, torch.Tensor] = {}
+        for _ in range(updates_due(global_step, self.cfg, self.updates)):
+            metrics["td_loss"] = self.update()
+            self.updates += 1
+        syncs = global_step // self.cfg.target_update_every
+        if syncs > self.target_syncs:
+            self.q_target.load_state_dict(self.q.state_dict())
+            self.target_syncs = syncs
+        return metrics
+
+    def update(self) -> torch.Tensor:
+        """One gradient step on the double-Q loss of a k-step minibatch; returns the loss."""
+        cfg = self.cfg
+        batch = self.replay.sample(
+            cfg.batch_size,
+            k=cfg.k,
+            gamma=cfg.gamma,
+            recent=cfg.effective_recent_window if cfg.sample_recent else None,
+            stride=cfg.k if cfg.stride else 1,
+        )
+        t = batch_tensors(batch, self.device)
+        q_B = self.q(t["obs"]).gather(1, t["actions"].unsqueeze(1)).squeeze(1)
+        with torch.no_grad():
+            y_B = double_q_target(
+                t["returns"], t["bootstrap"], self.q(t["next_obs"]), self.q_target(t["next_obs"])
+            )
+        loss = td_loss(q_B, y_B, self.cfg.loss)
+        clip_and_step(loss, list(self.q.parameters()), self.opt, cfg.max_grad_norm)
+        return loss.detach()
+
+    def diagnostics(self) -> dict[str, float]:
+        return {"epsilon": self.epsilon, "k": float(self.cfg.k)}
+
+    # ------------------------------------------------------------------ checkpoints
+    def state_dict(self, include_replay: bool = True) -> dict[str, Any]:
+        return {
+            "q": self.q.state_dict(),
+            "q_target": self.q_target.state_dict(),
+            "opt": self.opt.state_dict(),
+            "rng": self.rng.bit_generator.state,
+            "counters": {"updates": self.updates, "target_syncs": self.target_syncs},
+            "replay": self.replay.state_dict() if include_replay else None,
+        }
+
+    def load_state_dict(self, state: dict[str, Any]) -> None:
+        self.q.load_state_dict(state["q"])
+        self.q_target.load_state_dict(state["q_target"])
+        self.opt.load_state_dict(state["opt"])
+        self.rng.bit_generator.state = state["rng"]
+        self.updates = state["counters"]["updates"]
+        self.target_syncs = state["counters"]["target_syncs"]
+        if state.get("replay") is not None:
+            self.replay.load_state_dict(state["replay"])
+
+    def load_policy(self, state: dict[str, Any]) -> None:
+        """Weights only (for acting from a finished run)."""
+        self.q.load_state_dict(state["q"])

@@ -1,0 +1,524 @@
+"""Bayesian linear regression (BLR) head: per-action posterior (Eq. 9), Thompson sampling (Eq. 7).
+
+Q(s, a) = phi(s)^T w_a with a Gaussian posterior over each w_a in R^d (paper section 4.2, SPEC 2.1):
+
+    Cov_a  = (Phi_a Phi_a^T / noise_std^2 + I / prior_std^2)^-1            (Eq. 9)
+    mean_a = Cov_a Phi_a y_a / noise_std^2                                   (Eq. 9)
+    w_a    = mean_a + sqrt(Cov_a) z,  z ~ N(0, I)                            (Eq. 7)
+
+``prior_std`` is the paper's sigma (Table 1: 0.1) and ``noise_std`` its sigma_eps (Table 1: 1); both
+are standard deviations so the formula above reads literally like SPEC 2.1.
+
+Only the sufficient statistics Phi_a Phi_a^T (``phiphiT_ADD``) and Phi_a y_a (``phiy_AD``) are
+kept, so the head works in batch mode (``fit``: reset, accumulate, refresh, as in the paper) and in
+an incremental mode (``accumulate`` + ``refresh``, optionally with exponential forgetting) whose
+refresh costs O(|A| d^3) and never rescans the replay buffer (SPEC 2.1).
+
+Tensor names carry shape suffixes: N samples, B rows (states / environments), A actions, D features.
+"""
+
+from __future__ import annotations
+
+import math
+from typing import Any
+
+import torch
+
+__all__ = [
+    "BLRHead",
+    "blr_posterior",
+    "blr_posterior_factor",
+    "cholesky_jitter",
+    "greedy_predictive_variance",
+]
+
+# Largest number of float elements a (rows, A, D) temporary may hold in q_sample / predictive_var;
+# bigger batches are processed in row blocks so memory stays bounded (16 MiB of float32).
+_MAX_BLOCK_ELEMS = 1 << 22
+
+
+def cholesky_jitter(
+    m_XDD: torch.Tensor,
+    initial_jitter: float = 1e-10,
+    growth: float = 10.0,
+    max_tries: int = 30,
+) -> tuple[torch.Tensor, torch.Tensor]:
+    """Lower Cholesky factor of a (batch of) symmetric matrices, repaired with jitter if needed.
+
+    The input is symmetrised, (M + M^T) / 2, because a precision or covariance built in floating
+    point is only symmetric up to rounding (the BDQN authors symmetrise too). Each matrix whose
+    factorisation fails gets ``jitter * I`` added, starting at ``initial_jitter * mean |diag|`` and
+    multiplied by ``growth`` per try, until ``torch.linalg.cholesky_ex`` succeeds. No exception is
+    raised for a matrix that jitter can fix; the caller decides whether to log the repair.
+
+    Args:
+        m_XDD: tensor of shape (..., D, D).
+        initial_jitter: first jitter, relative to the mean absolute diagonal of each matrix.
+        growth: factor by which the jitter grows per failed try.
+        max_tries: tries after the plain attempt before giving up.
+
+    Returns:
+        (L_XDD, jitter_X): lower-triangular factors with L L^T = sym(M) + jitter I, and the absolute
+        jitter added to each matrix (0 where none was needed).
+
+    Raises:
+        ValueError: the input is not square, holds NaN/inf, or cannot be repaired in ``max_tries``.
+    """
+    if m_XDD.dim() < 2 or m_XDD.shape[-1] != m_XDD.shape[-2]:
+        raise ValueError(f"expected a (..., D, D) tensor, got shape {tuple(m_XDD.shape)}")
+    if not bool(torch.isfinite(m_XDD).all()):
+        raise ValueError("cholesky_jitter: the matrix holds NaN or inf; jitter cannot repair that")
+    sym_XDD = 0.5 * (m_XDD + m_XDD.transpose(-1, -2))
+    batch_shape = sym_XDD.shape[:-2]
+    dim = sym_XDD.shape[-1]
+    sym_YDD = sym_XDD.reshape(-1, dim, dim)  # flatten the batch so failed matrices can be indexed
+    jitter_Y = torch.zeros(sym_YDD.shape[0], dtype=sym_YDD.dtype, device=sym_YDD.device)
+    l_YDD, info_Y = torch.linalg.cholesky_ex(sym_YDD)
+    failed_Y = info_Y != 0
+    if bool(failed_Y.any()):
+        eye_DD = torch.eye(dim, dtype=sym_YDD.dtype, device=sym_YDD.device)
+        scale_Y = sym_YDD.diagonal(dim1=-2, dim2=-1).abs().mean(-1)
+        scale_Y = torch.where(scale_Y > 0, scale_Y, torch.ones_like(scale_Y))
+        step_Y = initial_jitter * scale_Y
+        for _ in range(max_tries):
+            idx_F = failed_Y.nonzero().squeeze(-1)
+            trial_FDD = sym_YDD[idx_F] + step_Y[idx_F, None, None] * eye_DD
+            l_FDD, info_F = torch.linalg.cholesky_ex(trial_FDD)
+            ok_F = info_F == 0
+            ok_idx = idx_F[ok_F]
+            l_YDD[ok_idx] = l_FDD[ok_F]
+            jitter_Y[ok_idx] = step_Y[ok_idx]
+            failed_Y[ok_idx] = False
+            if not bool(failed_Y.any()):
+                break
+            step_Y = step_Y * growth
+        else:
+            raise ValueError(
+                f"cholesky_jitter: {int(failed_Y.sum())} matrix(es) still not positive definite "
+                f"after {max_tries} jitter increases (last jitter {float(step_Y.max()):.3g})"
+            )
+    return l_YDD.reshape(*batch_shape, dim, dim), jitter_Y.reshape(batch_shape)
+
+
+def _check_stds(prior_std: float, noise_std: float) -> None:
+    if not (prior_std > 0 and math.isfinite(prior_std)):
+        raise ValueError(f"prior_std must be a finite number > 0, got {prior_std}")
+    if not (noise_std > 0 and math.isfinite(noise_std)):
+        raise ValueError(f"noise_std must be a finite number > 0, got {noise_std}")
+
+
+def blr_posterior_factor(
+    phiphiT_ADD: torch.Tensor,
+    phiy_AD: torch.Tensor,
+    prior_std: float,
+    noise_std: float,
+) -> tuple[torch.Tensor, torch.Tensor, torch.Tensor]:
+    """Eq. 9 posterior as (mean, square root of the covariance, jitter), from sufficient statistics.
+
+    The precision P_a = Phi_a Phi_a^T / noise_std^2 + I / prior_std^2 is factored as L L^T
+    (jitter-repaired). Then Cov_a = P_a^-1 = L^-T L^-1, so U_a = L^-T (upper triangular) satisfies
+    U_a U_a^T = Cov_a and is the sqrt(Cov_a) of Eq. 7; mean_a = P_a^-1 Phi_a y_a / noise_std^2.
+    Cost O(d^3) per action, no data needed.
+
+    Args:
+        phiphiT_ADD: sum over samples of phi phi^T per action, shape (..., D, D).
+        phiy_AD: sum over samples of phi * y per action, shape (..., D).
+        prior_std: prior standard deviation sigma of each weight (zero-mean prior).
+        noise_std: observation noise standard deviation sigma_eps.
+
+    Returns:
+        (mean_AD, sqrt_cov_ADD, jitter_A), in the dtype of the statistics.
+    """
+    _check_stds(prior_std, noise_std)
+    dim = phiphiT_ADD.shape[-1]
+    eye_DD = torch.eye(dim, dtype=phiphiT_ADD.dtype, device=phiphiT_ADD.device)
+    precision_ADD = phiphiT_ADD / noise_std**2 + eye_DD / prior_std**2  # Eq. 9, inverse of Cov_a
+    l_ADD, jitter_A = cholesky_jitter(precision_ADD)
+    rhs_AD1 = (phiy_AD / noise_std**2).unsqueeze(-1)
+    mean_AD = torch.cholesky_solve(rhs_AD1, l_ADD).squeeze(-1)
+    # L^-1 by a triangular solve against I (cheaper and stabler than a general inverse).
+    linv_ADD = torch.linalg.solve_triangular(l_ADD, eye_DD.expand_as(l_ADD), upper=False)
+    sqrt_cov_ADD = linv_ADD.transpose(-1, -2)  # U = L^-T, U U^T = Cov_a
+    return mean_AD, sqrt_cov_ADD, jitter_A
+
+
+def blr_posterior(
+    phiphiT_ADD: torch.Tensor,
+    phiy_AD: torch.Tensor,
+    prior_std: float,
+    noise_std: float,
+) -> tuple[torch.Tensor, torch.Tensor]:
+    """Posterior mean and covariance of Eq. 9 from the per-action sufficient statistics.
+
+    Cov_a = (Phi_a Phi_a^T / noise_std^2 + I / prior_std^2)^-1 and
+    mean_a = Cov_a Phi_a y_a / noise_std^2. An action without data gets the prior (mean 0,
+    covariance prior_std^2 I). A precision that needs jitter is repaired silently; use
+    ``blr_posterior_factor`` to see the jitter.
+
+    Args:
+        phiphiT_ADD: sum of phi phi^T per action, shape (..., D, D).
+        phiy_AD: sum of phi * y per action, shape (..., D).
+        prior_std: prior standard deviation sigma.
+        noise_std: noise standard deviation sigma_eps.
+
+    Returns:
+        (mean_AD, cov_ADD) in the dtype of the statistics.
+    """
+    mean_AD, sqrt_cov_ADD, _ = blr_posterior_factor(phiphiT_ADD, phiy_AD, prior_std, noise_std)
+    cov_ADD = sqrt_cov_ADD @ sqrt_cov_ADD.transpose(-1, -2)
+    return mean_AD, 0.5 * (cov_ADD + cov_ADD.transpose(-1, -2))
+
+
+class BLRHead:
+    """Per-action Bayesian linear regression on features phi (Eq. 9), Thompson sampling (Eq. 7).
+
+    Holds the sufficient statistics ``phiphiT_ADD`` (sum phi phi^T) and ``phiy_AD`` (sum phi y) per
+    action in ``stats_dtype`` (float64 by default, since sums over 1e5 samples lose precision in
+    float32), and caches the posterior mean and square-root covariance in float32 on ``device`` for
+    acting. Before the first ``refresh`` the posterior is the prior: mean 0 (or what ``set_mean``
+    gave) and covariance prior_std^2 I.
+
+    Args:
+        num_actions: |A|.
+        dim: feature dimension d.
+        prior_std: prior standard deviation sigma (SPEC/Table 1 default 0.1).
+        noise_std: observation noise standard deviation sigma_eps (default 1).
+        cov_scale: multiplies the covariance used for sampling and predictive variance (the BDQN
+            authors' code multiplies the stored covariance by the prior variance; SPEC calls it
+            the covariance scale). 1 gives the literal Eq. 9 posterior.
+        forgetting: in (0, 1]; every ``accumulate`` first multiplies the existing statistics by it
+            (exponential forgetting of old features / targets). 1 = no forgetting.
+        device: where statistics and caches live.
+        stats_dtype: dtype of the sufficient statistics and of the exact posterior.
+    """
+
+    def __init__(
+        self,
+        *,
+        num_actions: int,
+        dim: int,
+        prior_std: float = 0.1,
+        noise_std: float = 1.0,
+        cov_scale: float = 1.0,
+        forgetting: float = 1.0,
+        device: str | torch.device = "cpu",
+        stats_dtype: torch.dtype = torch.float64,
+    ) -> None:
+        if num_actions < 1:
+            raise ValueError(f"num_actions must be >= 1, got {num_actions}")
+        if dim < 1:
+            raise ValueError(f"dim must be >= 1, got {dim}")
+        _check_stds(prior_std, noise_std)
+        if not (cov_scale >= 0 and math.isfinite(cov_scale)):
+            raise ValueError(f"cov_scale must be a finite number >= 0, got {cov_scale}")
+        if not (0 < forgetting <= 1):
+            raise ValueError(f"forgetting must be in (0, 1], got {forgetting}")
+        if not stats_dtype.is_floating_point:
+            raise ValueError(f"stats_dtype must be a floating dtype, got {stats_dtype}")
+        self.num_actions = int(num_actions)
+        self.dim = int(dim)
+        self.prior_std = float(prior_std)
+        self.noise_std = float(noise_std)
+        self.cov_scale = float(cov_scale)
+        self.forgetting = float(forgetting)
+        self.device = torch.device(device)
+        self.stats_dtype = stats_dtype
+        # Number of per-action precisions that needed jitter so far, and the largest jitter of the
+        # latest refresh (0 if none); the agent logs these.
+        self.jitter_events: int = 0
+        self.last_jitter: float = 0.0
+        self.num_refreshes: int = 0
+
+        a, d = self.num_actions, self.dim
+        self.phiphiT_ADD = torch.zeros(a, d, d, dtype=stats_dtype, device=self.device)
+        self.phiy_AD = torch.zeros(a, d, dtype=stats_dtype, device=self.device)
+        self.count_A = torch.zeros(
+            a, dtype=stats_dtype, device=self.device
+        )  # (forgetting-weighted)
+        # Exact posterior (stats dtype); starts at the prior N(0, prior_std^2 I).
+        self._mean_AD = torch.zeros(a, d, dtype=stats_dtype, device=self.device)
+        eye_DD = torch.eye(d, dtype=stats_dtype, device=self.device)
+        self._sqrt_cov_ADD = (self.prior_std * eye_DD).expand(a, d, d).clone()
+        self._rebuild_cache()
+
+    # ----------------------------------------------------------------------------------------------
+    # statistics and posterior updates
+    # ----------------------------------------------------------------------------------------------
+    def reset_statistics(self) -> None:
+        """Zero the sufficient statistics (the posterior itself changes at the next ``refresh``)."""
+        self.phiphiT_ADD.zero_()
+        self.phiy_AD.zero_()
+        self.count_A.zero_()
+
+    @torch.no_grad()
+    def accumulate(
+        self,
+        phi_ND: torch.Tensor,
+        action_N: torch.Tensor,
+        y_N: torch.Tensor,
+        chunk_size: int = 8192,
+    ) -> None:
+        """Add samples (phi_i, a_i, y_i) to the per-action statistics Phi_a Phi_a^T and Phi_a y_a.
+
+        Existing statistics are first multiplied by ``forgetting``. Samples are grouped by action
+        with one sort, then each action's rows are added with one GEMM per chunk of ``chunk_size``
+        rows (chunking bounds the float64 copy of phi: 8192 x 512 x 8 B = 32 MiB).
+        """
+        if phi_ND.dim() != 2 or phi_ND.shape[1] != self.dim:
+            raise ValueError(f"phi_ND must have shape (N, {self.dim}), got {tuple(phi_ND.shape)}")
+        n = phi_ND.shape[0]
+        if action_N.shape != (n,) or y_N.shape != (n,):
+            raise ValueError(
+                f"action_N and y_N must have shape ({n},), got {tuple(action_N.shape)} and "
+                f"{tuple(y_N.shape)}"
+            )
+        if chunk_size < 1:
+            raise ValueError(f"chunk_size must be >= 1, got {chunk_size}")
+        if self.forgetting != 1.0:
+            self.phiphiT_ADD.mul_(self.forgetting)
+            self.phiy_AD.mul_(self.forgetting)
+            self.count_A.mul_(self.forgetting)
+        if n == 0:
+            return
+        action_N = action_N.to(device=self.device, dtype=torch.long)
+        if int(action_N.min()) < 0 or int(action_N.max()) >= self.num_actions:
+            raise ValueError(
+                f"actions must lie in [0, {self.num_actions - 1}], got range "
+                f"[{int(action_N.min())}, {int(action_N.max())}]"
+            )
+        phi_ND = phi_ND.detach().to(device=self.device)
+        y_N = y_N.detach().to(device=self.device, dtype=self.stats_dtype)
+        order_N = torch.argsort(action_N, stable=True)
+        counts_A = torch.bincount(action_N, minlength=self.num_actions)
+        self.count_A += counts_A.to(self.stats_dtype)
+        start = 0
+        for a, count in enumerate(counts_A.tolist()):
+            for lo in range(start, start + count, chunk_size):
+                idx_C = order_N[lo : min(lo + chunk_size, start + count)]
+                x_CD = phi_ND.index_select(0, idx_C).to(self.stats_dtype)
+                self.phiphiT_ADD[a].addmm_(x_CD.T, x_CD)
+                self.phiy_AD[a].addmv_(x_CD.T, y_N.index_select(0, idx_C))
+            start += count
+
+    @torch.no_grad()
+    def refresh(self) -> None:
+        """Recompute the Eq. 9 posterior of every action from the statistics, O(|A| d^3).
+
+        Updates the exact mean / square-root covariance (stats dtype) and the float32 caches used
+        for acting; counts jitter repairs in ``jitter_events`` / ``last_jitter``.
+        """
+        mean_AD, sqrt_cov_ADD, jitter_A = blr_posterior_factor(
+            self.phiphiT_ADD, self.phiy_AD, self.prior_std, self.noise_std
+        )
+        repaired = int((jitter_A > 0).sum())
+        self.jitter_events += repaired
+        self.last_jitter = float(jitter_A.max()) if repaired else 0.0
+        self._mean_AD = mean_AD
+        self._sqrt_cov_ADD = sqrt_cov_ADD
+        self.num_refreshes += 1
+        self._rebuild_cache()
+
+    def fit(self, phi_ND: torch.Tensor, action_N: torch.Tensor, y_N: torch.Tensor) -> None:
+        """Batch mode (the paper's posterior update): reset, accumulate all samples, refresh."""
+        self.reset_statistics()
+        self.accumulate(phi_ND, action_N, y_N)
+        self.refresh()
+
+    @torch.no_grad()
+    def set_mean(self, mean_AD: torch.Tensor) -> None:
+        """Set the posterior mean, e.g. from a linear layer's initial weights before any refresh.
+
+        The covariance is left unchanged; the next ``refresh`` overwrites the mean with Eq. 9.
+        """
+        if tuple(mean_AD.shape) != (self.num_actions, self.dim):
+            raise ValueError(
+                f"mean_AD must have shape ({self.num_actions}, {self.dim}), "
+                f"got {tuple(mean_AD.shape)}"
+            )
+        self._mean_AD = mean_AD.detach().to(device=self.device, dtype=self.stats_dtype).clone()
+        self._rebuild_cache()
+
+    def _rebuild_cache(self) -> None:
+        # float32 copies for acting. The square roots are laid out as (D, A*D) so that phi_BD @ it
+        # gives phi^T U_a for every action in a single GEMM (used by q_sample and predictive_var).
+        a, d = self.num_actions, self.dim
+        self._mean32_AD = self._mean_AD.to(torch.float32).contiguous()
+        self._sqrt_cov32_ADD = self._sqrt_cov_ADD.to(torch.float32).contiguous()
+        self._sqrt_cov32_DX = self._sqrt_cov32_ADD.permute(1, 0, 2).reshape(d, a * d).contiguous()
+
+    # ----------------------------------------------------------------------------------------------
+    # posterior access
+    # ----------------------------------------------------------------------------------------------
+    @property
+    def mean_AD(self) -> torch.Tensor:
+        """Posterior mean of Eq. 9 (float32, on ``device``)."""
+        return self._mean32_AD
+
+    @property
+    def sqrt_cov_ADD(self) -> torch.Tensor:
+        """Unscaled square root U_a of Cov_a (U U^T = Cov_a; float32, upper triangular)."""
+        return self._sqrt_cov32_ADD
+
+    @property
+    def cov_ADD(self) -> torch.Tensor:
+        """cov_scale * Cov_a, the covariance used for sampling (stats dtype)."""
+        cov_ADD = self._sqrt_cov_ADD @ self._sqrt_cov_ADD.transpose(-1, -2)
+        return self.cov_scale * 0.5 * (cov_ADD + cov_ADD.transpose(-1, -2))
+
+    def posterior(self) -> tuple[torch.Tensor, torch.Tensor]:
+        """The literal Eq. 9 posterior (mean_AD, Cov_a), unscaled, in the stats dtype."""
+        cov_ADD = self._sqrt_cov_ADD @ self._sqrt_cov_ADD.transpose(-1, -2)
+        return self._mean_AD.clone(), 0.5 * (cov_ADD + cov_ADD.transpose(-1, -2))
+
+    def _phi32(self, phi_BD: torch.Tensor) -> torch.Tensor:
+        if phi_BD.dim() != 2 or phi_BD.shape[1] != self.dim:
+            raise ValueError(f"phi_BD must have shape (B, {self.dim}), got {tuple(phi_BD.shape)}")
+        return phi_BD.detach().to(device=self.device, dtype=torch.float32)
+
+    def _block_rows(self) -> int:
+        return max(1, _MAX_BLOCK_ELEMS // (self.num_actions * self.dim))
+
+    # ----------------------------------------------------------------------------------------------
+    # acting
+    # ----------------------------------------------------------------------------------------------
+    @torch.no_grad()
+    def q_mean(self, phi_BD: torch.Tensor) -> torch.Tensor:
+        """Q under the posterior mean, phi^T mean_a (Eq. 8's w = mean), shape (B, A), float32."""
+        return self._phi32(phi_BD) @ self._mean32_AD.T
+
+    @torch.no_grad()
+    def q_sample(
+        self, phi_BD: torch.Tensor, generator: torch.Generator | None = None
+    ) -> torch.Tensor:
+        """Thompson-sampled Q of Eq. 7: phi^T (mean_a + sqrt(cov_scale) U_a z), shape (B, A).
+
+        A fresh, independent z ~ N(0, I_d) is drawn for every row (state / environment) and every
+        action. Only phi^T U_a (B x A x D) is formed, never B x A weight matrices, in row blocks
+        of bounded size. ``generator`` must live on the head's device.
+        """
+        phi_BD = self._phi32(phi_BD)
+        q_BA = phi_BD @ self._mean32_AD.T
+        a, d = self.num_actions, self.dim
+        scale = math.sqrt(self.cov_scale)
+        step = self._block_rows()
+        for lo in range(0, phi_BD.shape[0], step):
+            blk_KD = phi_BD[lo : lo + step]
+            phiu_KAD = (blk_KD @ self._sqrt_cov32_DX).view(-1, a, d)
+            z_KAD = torch.randn(
+                phiu_KAD.shape, generator=generator, device=self.device, dtype=torch.float32
+            )
+            q_BA[lo : lo + step] += scale * (phiu_KAD * z_KAD).sum(-1)
+        return q_BA
+
+    @torch.no_grad()
+    def sample_weights(self, n: int, generator: torch.Generator | None = None) -> torch.Tensor:
+        """n independent draws w = mean_a + sqrt(cov_scale) U_a z of every action's weights (Eq. 7).
+
+        Returns shape (n, A, D), float32; z is independent across draws and actions.
+        """
+        if n < 0:
+            raise ValueError(f"n must be >= 0, got {n}")
+        z_ADN = torch.randn(
+            (self.num_actions, self.dim, n),
+            generator=generator,
+            device=self.device,
+            dtype=torch.float32,
+        )
+        noise_ADN = torch.bmm(self._sqrt_cov32_ADD, z_ADN)
+        return self._mean32_AD.unsqueeze(0) + math.sqrt(self.cov_scale) * noise_ADN.permute(2, 0, 1)
+
+    @torch.no_grad()
+    def predictive_var(self, phi_BD: torch.Tensor) -> torch.Tensor:
+        """Variance of the sampled Q: cov_scale * phi^T Cov_a phi = cov_scale * ||U_a^T phi||^2.
+
+        Shape (B, A), float32. Costs B * A * D^2; for one action per row use
+        ``predictive_var_action``.
+        """
+        phi_BD = self._phi32(phi_BD)
+        a, d = self.num_actions, self.dim
+        out_BA = torch.empty(phi_BD.shape[0], a, dtype=torch.float32, device=self.device)
+        step = self._block_rows()
+        for lo in range(0, phi_BD.shape[0], step):
+            phiu_KAD = (phi_BD[lo : lo + step] @ self._sqrt_cov32_DX).view(-1, a, d)
+            out_BA[lo : lo + step] = phiu_KAD.square().sum(-1)
+        return self.cov_scale * out_BA
+
+    @torch.no_grad()
+    def predictive_var_action(self, phi_BD: torch.Tensor, action_B: torch.Tensor) -> torch.Tensor:
+        """cov_scale * phi_b^T Cov_{a_b} phi_b for one action per row, shape (B,), float32.
+
+        Rows are grouped by action (one GEMM per action present), so the cost is B * D^2 rather
+        than B * A * D^2 (this matters for the adaptive-k Q-variance over ~1e5 refresh states).
+        """
+        phi_BD = self._phi32(phi_BD)
+        action_B = action_B.to(device=self.device, dtype=torch.long)
+        if action_B.shape != (phi_BD.shape[0],):
+            raise ValueError(
+                f"action_B must have shape ({phi_BD.shape[0]},), got {tuple(action_B.shape)}"
+            )
+        out_B = torch.empty(phi_BD.shape[0], dtype=torch.float32, device=self.device)
+        for a in torch.unique(action_B).tolist():
+            idx_K = (action_B == a).nonzero().squeeze(-1)
+            phiu_KD = phi_BD.index_select(0, idx_K) @ self._sqrt_cov32_ADD[a]
+            out_B[idx_K] = phiu_KD.square().sum(-1)
+        return self.cov_scale * out_B
+
+    # ----------------------------------------------------------------------------------------------
+    # checkpointing
+    # ----------------------------------------------------------------------------------------------
+    def state_dict(self) -> dict[str, Any]:
+        """Plain dict of tensors and numbers that restores this head exactly."""
+        return {
+            "num_actions": self.num_actions,
+            "dim": self.dim,
+            "prior_std": self.prior_std,
+            "noise_std": self.noise_std,
+            "cov_scale": self.cov_scale,
+            "forgetting": self.forgetting,
+            "jitter_events": self.jitter_events,
+            "last_jitter": self.last_jitter,
+            "num_refreshes": self.num_refreshes,
+            "phiphiT_ADD": self.phiphiT_ADD.clone(),
+            "phiy_AD": self.phiy_AD.clone(),
+            "count_A": self.count_A.clone(),
+            "mean_AD": self._mean_AD.clone(),
+            "sqrt_cov_ADD": self._sqrt_cov_ADD.clone(),
+        }
+
+    def load_state_dict(self, state: dict[str, Any]) -> None:
+        """Restore from ``state_dict()``; num_actions and dim must match this head."""
+        if int(state["num_actions"]) != self.num_actions or int(state["dim"]) != self.dim:
+            raise ValueError(
+                f"state is for num_actions={state['num_actions']}, dim={state['dim']}; this head "
+                f"has num_actions={self.num_actions}, dim={self.dim}"
+            )
+        _check_stds(float(state["prior_std"]), float(state["noise_std"]))
+        self.prior_std = float(state["prior_std"])
+        self.noise_std = float(state["noise_std"])
+        self.cov_scale = float(state["cov_scale"])
+        self.forgetting = float(state["forgetting"])
+        self.jitter_events = int(state["jitter_events"])
+        self.last_jitter = float(state["last_jitter"])
+        self.num_refreshes = int(state["num_refreshes"])
+
+        def _t(key: str) -> torch.Tensor:
+            return state[key].detach().to(device=self.device, dtype=self.stats_dtype).clone()
+
+        self.phiphiT_ADD = _t("phiphiT_ADD")
+        self.phiy_AD = _t("phiy_AD")
+        self.count_A = _t("count_A")
+        self._mean_AD = _t("mean_AD")
+        self._sqrt_cov_ADD = _t("sqrt_cov_ADD")
+        self._rebuild_cache()
+
+
+@torch.no_grad()
+def greedy_predictive_variance(head: BLRHead, phi_BD: torch.Tensor) -> float:
+    """Q-variance for adaptive k (Alg. 1 line 7, SPEC 2.1).
+
+    The mean over rows of cov_scale * phi^T Cov_a phi at the greedy action a = argmax_a q_mean.
+    """
+    if phi_BD.shape[0] == 0:
+        raise ValueError("greedy_predictive_variance needs at least one row of features")
+    greedy_B = head.q_mean(phi_BD).argmax(dim=1)
+    return float(head.predictive_var_action(phi_BD, greedy_B).mean())

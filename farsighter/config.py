@@ -1,0 +1,488 @@
+"""Typed run configuration, named presets and their sources.
+
+A run is a pure function of its :class:`Config` and seed. Configs are frozen dataclasses with a
+docstring per field (tyro turns those into ``--help`` text). Presets are named sets of field
+values whose numbers cite their source; ``make_config`` layers them as
+
+    field defaults  <-  algorithm defaults  <-  preset  <-  explicit overrides
+
+and nothing mutates a config after it is built.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import json
+import math
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any, Literal
+
+from farsighter.errors import ConfigError
+
+ALGORITHMS: tuple[str, ...] = ("ddqn", "kddqn", "bdqn", "farsighter")
+"""Algorithms this version can train (SPEC section 2 lists the full family)."""
+
+PLANNED_ALGORITHMS: tuple[str, ...] = ("ob2i", "rnd", "krnd", "naf", "knaf", "bnaf", "farsighter-naf")
+"""Algorithms of the paper that are specified but not yet implemented in this version."""
+
+
+@dataclass(frozen=True)
+class BLRConfig:
+    """Bayesian linear regression head (paper section 4.2, Eq. 7 and 9)."""
+
+    prior_std: float = 0.1
+    """sigma in Eq. 9: the prior is N(0, sigma^2 I). Paper Table 1: 0.1."""
+    noise_std: float = 1.0
+    """sigma_eps in Eq. 9: the likelihood noise is N(0, sigma_eps^2). Paper Table 1: 1."""
+    cov_scale: float = 1.0
+    """Multiplies the posterior covariance used for Thompson draws (BDQN code: the prior variance)."""
+    posterior_every: int = 10_000
+    """M: environment steps between posterior refreshes. Paper Table 1: M = 10 N."""
+    posterior_samples: int = 1_000
+    """D: most recent transitions used by a batch-mode refresh. Table 1: 1k control, 100k Atari."""
+    mode: Literal["batch", "incremental"] = "batch"
+    """batch: recompute Phi Phi^T from D tuples each refresh; incremental: running statistics."""
+    forgetting: float = 1.0
+    """Incremental mode: statistics are multiplied by this before each accumulation (1 = none)."""
+    redraw: Literal["step", "every", "episode"] = "step"
+    """When a fresh Thompson draw z is made: every step, every `redraw_every` steps, or per episode."""
+    redraw_every: int = 1
+    """T for ``redraw=every``."""
+    target: Literal["mean", "thompson"] = "mean"
+    """Argmax of the Q-loss target under the posterior mean (Eq. 8) or a Thompson draw (BDQN code)."""
+
+
+@dataclass(frozen=True)
+class AdaptiveKConfig:
+    """Adaptive k (paper section 4.5, Algorithm 1 line 7)."""
+
+    enabled: bool = False
+    """Adjust k after every posterior refresh from the Q-variance."""
+    variance_target: float = 1.0
+    """epsilon of Algorithm 1: k += 1 when the Q-variance is below it, k -= 1 when above."""
+    k_min: int = 1
+    """Lower bound for k."""
+    k_max: int = 500
+    """Upper bound for k."""
+    empty_buffer: bool = True
+    """Empty the replay buffer after each change of k, as Algorithm 1 line 7 does."""
+
+
+@dataclass(frozen=True)
+class AtariConfig:
+    """Standard Atari preprocessing (SPEC section 3; Machado et al. 2018, Mnih et al. 2015)."""
+
+    frame_skip: int = 4
+    """Environment frames per agent step (max-pooled over the last two)."""
+    noop_max: int = 30
+    """Up to this many no-op actions at the start of an episode."""
+    screen_size: int = 84
+    """Side of the square grey observation."""
+    frame_stack: int = 4
+    """Number of stacked frames; the replay stores each frame once and stacks at sample time."""
+    terminal_on_life_loss: bool = True
+    """Training only: treat a life loss as terminal (the game continues)."""
+    clip_rewards: bool = True
+    """Training only: clip rewards to their sign."""
+    repeat_action_probability: float = 0.0
+    """Sticky actions (ALE v5 uses 0.25); 0 reproduces the DQN/BDQN protocol."""
+
+
+@dataclass(frozen=True)
+class Config:
+    """One training run: everything needed to reproduce it."""
+
+    algo: str = "ddqn"
+    """Algorithm: one of ddqn, kddqn, bdqn, farsighter."""
+    env: str = "CartPole-v1"
+    """Any Gymnasium id, passed to gymnasium.make unchanged (``module:EnvId`` works)."""
+    seed: int = 1
+    """Seed of the run (networks, exploration, replay sampling, environments)."""
+    total_steps: int = 100_000
+    """Environment steps to train for (summed over vectorised environments)."""
+    run_dir: str = ""
+    """Run directory; empty means runs/<env>__<algo>__s<seed>."""
+    preset: str = "auto"
+    """Preset the defaults came from (auto: atari for Atari ids, control otherwise)."""
+    device: str = "auto"
+    """auto (CUDA when present, else CPU), cpu, cuda or cuda:N."""
+    resume: bool = False
+    """Continue the run in run_dir from its last checkpoint."""
+    overwrite: bool = False
+    """Delete an existing run_dir and start afresh."""
+    num_envs: int = 1
+    """Environments stepped together (acting is batched over them)."""
+
+    # ----- learning (paper Table 1 unless noted) -----
+    optimizer: Literal["rmsprop", "adam"] = "rmsprop"
+    """Optimizer of the representation. Table 1: RMSProp."""
+    lr: float = 0.0025
+    """Learning rate. Table 1: 0.0025."""
+    rmsprop_alpha: float = 0.95
+    """RMSProp decay of the (squared) gradient averages; Table 1's 'momentum 0.95'."""
+    rmsprop_centered: bool = True
+    """Centered RMSProp (Graves 2013) as in DQN, whose 'gradient momentum' Table 1 reuses."""
+    optim_eps: float = 0.01
+    """Epsilon of the optimizer (DQN's 'min squared gradient' 0.01 for RMSProp)."""
+    gamma: float = 0.99
+    """Discount factor. Table 1: 0.99."""
+    k: int = 1
+    """Steps per return: 1 is one-step TD; k > 1 uses k-step returns with gamma^k bootstraps."""
+    stride: bool = False
+    """Algorithm 1 literally: one k-step tuple per k steps instead of one starting at every step."""
+    batch_size: int = 32
+    """Minibatch size of the representation update. Table 1: 32."""
+    buffer_size: int = 1_000_000
+    """Replay capacity in transitions. Table 1: 1M."""
+    sample_recent: bool = False
+    """Draw minibatches only from the latest `recent_window` transitions (Algorithm 1 line 4)."""
+    recent_window: int = 0
+    """Size of that window; 0 means N = target_update_every, as the paper says."""
+    learning_starts: int = 1_000
+    """Environment steps of pure exploration before the first update."""
+    train_every: int = 4
+    """Environment steps between representation updates. Table 1: 4."""
+    target_update_every: int = 1_000
+    """N: steps between target network copies. Table 1: 1k control, 10k Atari."""
+    loss: Literal["huber", "mse"] = "huber"
+    """TD loss: mse is Eq. 3 literally; huber is DQN's error clipping, more stable."""
+    max_grad_norm: float = 10.0
+    """Gradient norm clip (0 disables)."""
+    eps_start: float = 1.0
+    """Initial epsilon of epsilon-greedy exploration (ddqn, kddqn)."""
+    eps_end: float = 0.05
+    """Final epsilon."""
+    eps_decay_steps: int = 10_000
+    """Steps of the linear decay from eps_start to eps_end."""
+    hidden_sizes: tuple[int, ...] = (64, 64)
+    """MLP torso for flat observations (images use the Nature CNN, appendix 9.1.1)."""
+
+    # ----- evaluation, logging, checkpoints -----
+    eval_every: int = 10_000
+    """Steps between evaluation phases (0 disables periodic evaluation)."""
+    eval_episodes: int = 10
+    """Episodes per evaluation phase."""
+    eval_epsilon: float = 0.0
+    """Epsilon of the evaluation policy (greedy under the posterior mean for Bayesian agents)."""
+    eval_max_steps: int = 27_000
+    """Cap on steps of one evaluation episode."""
+    checkpoint_every: int = 25_000
+    """Steps between checkpoints (0: only at the end)."""
+    save_replay: bool = True
+    """Store the replay buffer in checkpoints, so a resumed run equals an uninterrupted one."""
+    log_every: int = 1_000
+    """Steps between SPS/loss rows in TensorBoard."""
+    progress: bool = True
+    """Show a progress bar (steps, SPS, recent return)."""
+    torch_threads: int = 0
+    """CPU threads for torch (0: torch's default)."""
+
+    blr: BLRConfig = field(default_factory=BLRConfig)
+    """Bayesian linear regression head (bdqn, farsighter)."""
+    adaptive_k: AdaptiveKConfig = field(default_factory=AdaptiveKConfig)
+    """Adaptive k (farsighter)."""
+    atari: AtariConfig = field(default_factory=AtariConfig)
+    """Atari preprocessing (applied automatically to ALE ids)."""
+
+    @property
+    def effective_recent_window(self) -> int:
+        """Window of Algorithm 1 line 4 (N when `recent_window` is 0)."""
+        return self.recent_window or self.target_update_every
+
+    def default_run_dir(self) -> Path:
+        safe_env = self.env.replace("/", "-").replace(":", "-")
+        return Path("runs") / f"{safe_env}__{self.algo}__s{self.seed}"
+
+    @property
+    def resolved_run_dir(self) -> Path:
+        return Path(self.run_dir) if self.run_dir else self.default_run_dir()
+
+
+# --------------------------------------------------------------------------------------------
+# Presets: each value cites its source.
+# --------------------------------------------------------------------------------------------
+
+
+@dataclass(frozen=True)
+class Preset:
+    """A named set of field values (dotted keys for nested fields) and where they come from."""
+
+    name: str
+    doc: str
+    source: str
+    values: dict[str, Any]
+
+
+PRESETS: dict[str, Preset] = {
+    p.name: p
+    for p in (
+        Preset(
+            "control",
+            "Table 1, robotic/low-dimensional column.",
+            "Farsighter paper, appendix 9.2 Table 1",
+            {
+                "optimizer": "rmsprop",
+                "lr": 0.0025,
+                "rmsprop_alpha": 0.95,
+                "gamma": 0.99,
+                "train_every": 4,
+                "batch_size": 32,
+                "buffer_size": 1_000_000,
+                "target_update_every": 1_000,  # N = 1k (robotic controls)
+                "blr.posterior_every": 10_000,  # M = 10 N
+                "blr.posterior_samples": 1_000,  # D = 1k tuples
+                "blr.prior_std": 0.1,
+                "blr.noise_std": 1.0,
+            },
+        ),
+        Preset(
+            "atari",
+            "Table 1, Atari column, with the DQN evaluation protocol for what Table 1 omits.",
+            "Farsighter paper Table 1; learning_starts, epsilon schedule and eval epsilon from "
+            "Dopamine's DQN/Rainbow Atari configs (Castro et al. 2018)",
+            {
+                "optimizer": "rmsprop",
+                "lr": 0.0025,
+                "rmsprop_alpha": 0.95,
+                "gamma": 0.99,
+                "train_every": 4,
+                "batch_size": 32,
+                "buffer_size": 1_000_000,
+                "target_update_every": 10_000,  # N = 10k (Atari)
+                "blr.posterior_every": 100_000,  # M = 10 N
+                "blr.posterior_samples": 100_000,  # D = 100k tuples
+                "blr.prior_std": 0.1,
+                "blr.noise_std": 1.0,
+                "learning_starts": 20_000,  # Dopamine min_replay_history
+                "eps_end": 0.01,  # Dopamine epsilon_train
+                "eps_decay_steps": 250_000,  # Dopamine epsilon_decay_period (agent steps)
+                "eval_epsilon": 0.001,  # Dopamine epsilon_eval
+                "eval_every": 250_000,
+                "eval_episodes": 10,
+                "checkpoint_every": 250_000,
+                "save_replay": False,  # a 1M-frame buffer is 7 GB; opt in with --save-replay
+                "log_every": 10_000,
+            },
+        ),
+        Preset(
+            "bdqn",
+            "The BDQN authors' settings (Atari scale) for the bdqn agent.",
+            "kazizzad/BDQN-MxNet-Gluon (public code), as listed in SPEC section 2.1",
+            {
+                "target_update_every": 10_000,
+                "learning_starts": 20_000,
+                "blr.prior_std": math.sqrt(1e-3),  # prior variance 1e-3
+                "blr.noise_std": 1.0,  # noise variance 1
+                "blr.cov_scale": 1e-3,  # stored covariance multiplied by the prior variance
+                "blr.posterior_every": 100_000,
+                "blr.posterior_samples": 100_000,  # min(|buffer|, 100k), statistics reset each time
+                "blr.mode": "batch",
+                "blr.target": "thompson",  # argmax under the Thompson draw, value under target mean
+            },
+        ),
+        Preset(
+            "cartpole",
+            "Control preset with a faster optimiser and shorter schedules for CartPole-sized "
+            "tasks (our tuning; used by the learning checks and the README quick start).",
+            "Farsighter tuning on CartPole-v1 (benchmarks/learning.py); Adam as in CleanRL's "
+            "dqn.py classic-control defaults",
+            {
+                "optimizer": "adam",
+                "lr": 0.0005,
+                "optim_eps": 1e-8,
+                "gamma": 0.99,
+                "train_every": 1,
+                "batch_size": 64,
+                "buffer_size": 50_000,
+                "learning_starts": 1_000,
+                "target_update_every": 500,
+                "eps_end": 0.02,
+                "eps_decay_steps": 15_000,
+                "hidden_sizes": (128, 128),
+                "blr.posterior_every": 2_000,
+                "blr.posterior_samples": 10_000,
+                "blr.prior_std": 1.0,
+                "blr.noise_std": 1.0,
+                "eval_every": 5_000,
+                "eval_episodes": 5,
+                "loss": "huber",
+            },
+        ),
+    )
+}
+
+ALGO_DEFAULTS: dict[str, dict[str, Any]] = {
+    "ddqn": {},
+    # k-DDQN: epsilon-greedy with k-step returns (paper section 5.2 baselines).
+    "kddqn": {"k": 3},
+    # BDQN: Thompson sampling on the BLR posterior, 1-step (section 4.2). A new weight draw every
+    # T^sample = 1,000 steps as in Azizzadenesheli et al. (2018); --blr.redraw changes it.
+    "bdqn": {"k": 1, "blr.redraw": "every", "blr.redraw_every": 1_000},
+    # Farsighter: fresh draw every step (Algorithm 2), k-step returns, minibatches from the latest
+    # N transitions (Algorithm 1 line 4). k = 10 is the smallest k of Figure 4.
+    "farsighter": {"k": 10, "blr.redraw": "step", "sample_recent": True},
+}
+
+
+def _nested_replace(obj: Any, dotted: dict[str, Any]) -> Any:
+    """``dataclasses.replace`` with dotted keys for nested dataclasses; unknown keys raise."""
+    direct: dict[str, Any] = {}
+    nested: dict[str, dict[str, Any]] = {}
+    names = {f.name for f in dataclasses.fields(obj)}
+    for key, value in dotted.items():
+        head, _, rest = key.partition(".")
+        if head not in names:
+            raise ConfigError(f"unknown config field '{key}'")
+        if rest:
+            nested.setdefault(head, {})[rest] = value
+        else:
+            direct[head] = value
+    for head, sub in nested.items():
+        direct[head] = _nested_replace(getattr(obj, head), sub)
+    return dataclasses.replace(obj, **direct)
+
+
+def is_atari_id(env_id: str) -> bool:
+    """True for ALE ids (``ALE/Pong-v5``, ``PongNoFrameskip-v4``) without importing ale-py."""
+    name = env_id.split(":")[-1]
+    return name.startswith("ALE/") or "NoFrameskip" in name
+
+
+def resolve_preset_name(preset: str, env: str) -> str:
+    if preset == "auto":
+        return "atari" if is_atari_id(env) else "control"
+    if preset not in PRESETS:
+        raise ConfigError(f"unknown preset '{preset}'; accepted: auto, {', '.join(PRESETS)}")
+    return preset
+
+
+def make_config(
+    algo: str = "ddqn", env: str = "CartPole-v1", preset: str = "auto", **overrides: Any
+) -> Config:
+    """Build a config: field defaults <- algorithm defaults <- preset <- ``overrides``.
+
+    ``overrides`` use field names; nested fields are written ``blr__prior_std`` or passed in a
+    dict as ``{"blr.prior_std": ...}`` via ``**{"blr.prior_std": 0.1}``.
+    """
+    if algo not in ALGORITHMS:
+        raise ConfigError(unknown_algo_message(algo))
+    name = resolve_preset_name(preset, env)
+    values: dict[str, Any] = {}
+    values.update(ALGO_DEFAULTS[algo])
+    values.update(PRESETS[name].values)
+    values.update({k.replace("__", "."): v for k, v in overrides.items()})
+    values.update({"algo": algo, "env": env, "preset": name})
+    return _nested_replace(Config(), values)
+
+
+def unknown_algo_message(algo: str) -> str:
+    planned = f" ({', '.join(PLANNED_ALGORITHMS)} are planned)" if PLANNED_ALGORITHMS else ""
+    if algo in PLANNED_ALGORITHMS:
+        return f"algorithm '{algo}' is not implemented yet; accepted: {', '.join(ALGORITHMS)}"
+    return f"unknown algorithm '{algo}'; accepted: {', '.join(ALGORITHMS)}{planned}"
+
+
+def validate(cfg: Config) -> None:
+    """Raise :class:`ConfigError` with one line naming the problem and what is accepted."""
+    if cfg.algo not in ALGORITHMS:
+        raise ConfigError(unknown_algo_message(cfg.algo))
+    checks: list[tuple[bool, str]] = [
+        (cfg.k >= 1, f"k must be an integer >= 1 (got {cfg.k})"),
+        (cfg.lr > 0, f"lr must be > 0 (got {cfg.lr})"),
+        (cfg.buffer_size > 0, f"buffer_size must be > 0 (got {cfg.buffer_size})"),
+        (cfg.batch_size > 0, f"batch_size must be > 0 (got {cfg.batch_size})"),
+        (
+            cfg.batch_size <= cfg.buffer_size,
+            f"batch_size ({cfg.batch_size}) must not exceed buffer_size ({cfg.buffer_size})",
+        ),
+        (cfg.total_steps > 0, f"total_steps must be > 0 (got {cfg.total_steps})"),
+        (cfg.num_envs >= 1, f"num_envs must be >= 1 (got {cfg.num_envs})"),
+        (0.0 <= cfg.gamma <= 1.0, f"gamma must be in [0, 1] (got {cfg.gamma})"),
+        (cfg.train_every >= 1, f"train_every must be >= 1 (got {cfg.train_every})"),
+        (
+            cfg.target_update_every >= 1,
+            f"target_update_every must be >= 1 (got {cfg.target_update_every})",
+        ),
+        (cfg.learning_starts >= 0, f"learning_starts must be >= 0 (got {cfg.learning_starts})"),
+        (
+            0.0 <= cfg.eps_end <= 1.0 and 0.0 <= cfg.eps_start <= 1.0,
+            "eps_start and eps_end must be in [0, 1]",
+        ),
+        (0.0 <= cfg.eval_epsilon <= 1.0, "eval_epsilon must be in [0, 1]"),
+        (cfg.eps_decay_steps >= 0, "eps_decay_steps must be >= 0"),
+        (cfg.recent_window >= 0, "recent_window must be >= 0 (0 means target_update_every)"),
+        (
+            cfg.effective_recent_window <= cfg.buffer_size,
+            f"recent window ({cfg.effective_recent_window}) must not exceed buffer_size "
+            f"({cfg.buffer_size})",
+        ),
+        (
+            cfg.k <= cfg.buffer_size // cfg.num_envs,
+            f"k ({cfg.k}) must not exceed the per-environment buffer ({cfg.buffer_size // cfg.num_envs})",
+        ),
+        (all(h > 0 for h in cfg.hidden_sizes), "hidden_sizes must be positive integers"),
+        (cfg.blr.prior_std > 0, f"blr.prior_std must be > 0 (got {cfg.blr.prior_std})"),
+        (cfg.blr.noise_std > 0, f"blr.noise_std must be > 0 (got {cfg.blr.noise_std})"),
+        (cfg.blr.cov_scale > 0, f"blr.cov_scale must be > 0 (got {cfg.blr.cov_scale})"),
+        (0 < cfg.blr.forgetting <= 1, "blr.forgetting must be in (0, 1]"),
+        (cfg.blr.posterior_every >= 1, "blr.posterior_every must be >= 1"),
+        (cfg.blr.posterior_samples >= 1, "blr.posterior_samples must be >= 1"),
+        (cfg.blr.redraw_every >= 1, "blr.redraw_every must be >= 1"),
+        (
+            1 <= cfg.adaptive_k.k_min <= cfg.adaptive_k.k_max,
+            "adaptive_k bounds must satisfy 1 <= k_min <= k_max",
+        ),
+        (
+            not cfg.adaptive_k.enabled or cfg.adaptive_k.k_min <= cfg.k <= cfg.adaptive_k.k_max,
+            f"with adaptive k, the initial k ({cfg.k}) must lie in [k_min, k_max] = "
+            f"[{cfg.adaptive_k.k_min}, {cfg.adaptive_k.k_max}]",
+        ),
+        (cfg.eval_episodes >= 1, "eval_episodes must be >= 1"),
+        (cfg.checkpoint_every >= 0, "checkpoint_every must be >= 0"),
+        (cfg.torch_threads >= 0, "torch_threads must be >= 0"),
+    ]
+    for ok, message in checks:
+        if not ok:
+            raise ConfigError(message)
+    if cfg.adaptive_k.enabled and cfg.algo != "farsighter":
+        raise ConfigError("adaptive_k.enabled is only supported by --algo farsighter")
+    if cfg.device not in ("auto", "cpu", "cuda") and not cfg.device.startswith("cuda:"):
+        raise ConfigError(f"unknown device '{cfg.device}'; accepted: auto, cpu, cuda, cuda:N")
+
+
+# --------------------------------------------------------------------------------------------
+# JSON round trip (the run directory stores the resolved config).
+# --------------------------------------------------------------------------------------------
+
+
+def config_to_dict(cfg: Config) -> dict[str, Any]:
+    return dataclasses.asdict(cfg)
+
+
+def config_from_dict(data: dict[str, Any]) -> Config:
+    def build(cls: Any, values: dict[str, Any]) -> Any:
+        kwargs: dict[str, Any] = {}
+        for f in dataclasses.fields(cls):
+            if f.name not in values:
+                continue
+            value = values[f.name]
+            if dataclasses.is_dataclass(f.default_factory) if callable(f.default_factory) else False:
+                value = build(f.default_factory, value)
+            elif isinstance(value, list):
+                value = tuple(value)
+            kwargs[f.name] = value
+        return cls(**kwargs)
+
+    return build(Config, data)
+
+
+def save_config(cfg: Config, path: Path) -> None:
+    path.write_text(json.dumps(config_to_dict(cfg), indent=2) + "\n")
+
+
+def load_config(path: Path) -> Config:
+    try:
+        return config_from_dict(json.loads(path.read_text()))
+    except (OSError, ValueError, TypeError) as exc:
+        raise ConfigError(f"cannot read run config {path}: {exc}") from None

@@ -1,0 +1,323 @@
+"""Replay memory that stores every observation once and forms k-step targets when sampling.
+
+Layout (one circular stream per vectorised environment, Dopamine-style validity rules):
+
+* Row ``i`` holds the observation ``o_i`` at which action ``a_i`` was taken, the reward ``r_i``,
+  whether that step *terminated* or *truncated* the episode, and ``t_i``, the index of the row
+  within its episode. For stacked image observations only the newest frame is stored; the stack
+  is rebuilt at sample time from rows ``i-S+1..i`` and frames from before the episode start are
+  zeros (matching ``FrameStackObservation(padding_type="zero")`` on the acting side).
+* When an episode ends, one extra *final* row holds the last observation (action and reward
+  unused, never a start). It lets a time-limit truncation bootstrap from the real last state.
+* Rows are addressed by a monotonically increasing logical index; row ``L`` lives at
+  ``L % capacity``. Rows below ``count - capacity`` were overwritten.
+
+A start ``L`` is valid when (each rule has a unit test):
+
+1. it is not a final row, and lies in the live range (wraparound);
+2. all rows of its frame stack within the episode are still live (oldest rows overwritten);
+3. its k-step window is complete: every row up to the bootstrap row ``L + n`` has been written
+   (the write cursor), where ``n`` is k or the number of steps to the episode end (a window that
+   crosses an episode end stops there: no reward from the next episode);
+4. with ``stride``, ``t_L`` is a multiple of k (Algorithm 1 literally: one tuple per k steps);
+5. with a recent window, ``L`` is among the latest rows (Algorithm 1 line 4).
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from typing import Any
+
+import numpy as np
+
+from farsighter.errors import ConfigError
+from farsighter.ops.targets import nstep_returns
+
+TERMINATED = np.uint8(1)
+TRUNCATED = np.uint8(2)
+FINAL = np.uint8(4)
+
+
+@dataclass
+class Batch:
+    """A minibatch of k-step transitions (numpy; the agent moves it to its device)."""
+
+    obs: np.ndarray
+    """Start observations s_t (stacked for images)."""
+    actions: np.ndarray
+    """Actions a_t."""
+    returns: np.ndarray
+    """r^k = sum_j gamma^j r_{t+j}, float32."""
+    bootstrap: np.ndarray
+    """gamma^n, or 0 if the episode terminated inside the window, float32."""
+    next_obs: np.ndarray
+    """Bootstrap observations s_{t+n}."""
+    steps: np.ndarray
+    """n: transitions summed (k unless the episode ended first)."""
+    env_index: np.ndarray
+    """Stream (vectorised environment) of each sample."""
+    index: np.ndarray
+    """Logical row index of each start."""
+
+
+class ReplayBuffer:
+    """Circular replay over ``num_envs`` streams with frame stacking and k-step sampling."""
+
+    def __init__(
+        self,
+        capacity: int,
+        obs_shape: tuple[int, ...],
+        obs_dtype: Any,
+        *,
+        num_envs: int = 1,
+        frame_stack: int = 1,
+        action_shape: tuple[int, ...] = (),
+        action_dtype: Any = np.int32,
+        seed: int = 0,
+    ) -> None:
+        if capacity < 1:
+            raise ConfigError(f"replay capacity must be >= 1 (got {capacity})")
+        if num_envs < 1 or capacity < num_envs:
+            raise ConfigError(
+                f"replay capacity ({capacity}) must be at least num_envs ({num_envs}) >= 1"
+            )
+        if frame_stack < 1:
+            raise ConfigError(f"frame_stack must be >= 1 (got {frame_stack})")
+        if frame_stack > 1 and (len(obs_shape) < 2 or obs_shape[0] != frame_stack):
+            raise ConfigError(
+                f"frame_stack={frame_stack} needs observations shaped (stack, ...); got {obs_shape}"
+            )
+        self.num_envs = num_envs
+        self.capacity = capacity // num_envs  # per stream
+        self.frame_stack = frame_stack
+        self.obs_shape = tuple(obs_shape)
+        self.frame_shape = self.obs_shape[1:] if frame_stack > 1 else self.obs_shape
+        e, c = num_envs, self.capacity
+        self.frames = np.zeros((e, c, *self.frame_shape), dtype=obs_dtype)
+        self.actions = np.zeros((e, c, *action_shape), dtype=action_dtype)
+        self.rewards = np.zeros((e, c), dtype=np.float32)
+        self.flags = np.zeros((e, c), dtype=np.uint8)
+        self.t_ep = np.zeros((e, c), dtype=np.int32)
+        self.count = np.zeros(e, dtype=np.int64)  # logical rows written per stream
+        self.episode_t = np.zeros(e, dtype=np.int32)  # t of the next row per stream
+        self.floor = np.zeros(e, dtype=np.int64)  # rows below it were cleared
+        self.rng = np.random.default_rng(seed)
+
+    # ------------------------------------------------------------------ writing
+    @property
+    def nbytes(self) -> int:
+        return sum(a.nbytes for a in (self.frames, self.actions, self.rewards, self.flags, self.t_ep))
+
+    def __len__(self) -> int:
+        """Live rows over all streams (final rows included)."""
+        return int(np.minimum(self.count, self.capacity).sum())
+
+    def _frame(self, obs: np.ndarray) -> np.ndarray:
+        return obs[-1] if self.frame_stack > 1 else obs
+
+    def _write(self, e: int, frame: np.ndarray, action: Any, reward: float, flag: int) -> None:
+        slot = self.count[e] % self.capacity
+        self.frames[e, slot] = frame
+        self.actions[e, slot] = action
+        self.rewards[e, slot] = reward
+        self.flags[e, slot] = flag
+        self.t_ep[e, slot] = self.episode_t[e]
+        self.count[e] += 1
+        self.episode_t[e] += 1
+
+    def add(
+        self,
+        obs_E: np.ndarray,
+        action_E: np.ndarray,
+        reward_E: np.ndarray,
+        terminated_E: np.ndarray,
+        truncated_E: np.ndarray,
+        final_obs_E: np.ndarray | list[Any] | None = None,
+    ) -> None:
+        """Append one step of every stream. ``final_obs_E[e]`` is the last observation of an
+        episode that ended at this step (needed for truncations; stored for terminations too)."""
+        for e in range(self.num_envs):
+            term, trunc = bool(terminated_E[e]), bool(truncated_E[e])
+            flag = (TERMINATED if term else 0) | (TRUNCATED if trunc else 0)
+            self._write(e, self._frame(obs_E[e]), action_E[e], float(reward_E[e]), int(flag))
+            if term or trunc:
+                if final_obs_E is None or final_obs_E[e] is None:
+                    raise ValueError("final_obs_E is required for streams whose episode ended")
+                self._write(e, self._frame(np.asarray(final_obs_E[e])), 0, 0.0, int(FINAL))
+                self.episode_t[e] = 0
+
+    def clear(self) -> None:
+        """Forget every row (Algorithm 1 line 7 empties the buffer when k changes).
+
+        The episode in progress keeps its position so later rows stay consistent; its earlier
+        rows are gone, so the first new rows are valid starts only with a complete window.
+        """
+        self.floor = self.count.copy()
+
+    # ------------------------------------------------------------------ sampling
+    def _low(self) -> np.ndarray:
+        return np.maximum(np.maximum(self.count - self.capacity, 0), self.floor)
+
+    def valid_mask(
+        self, e_B: np.ndarray, start_B: np.ndarray, k: int, stride: int = 1
+    ) -> tuple[np.ndarray, np.ndarray]:
+        """Validity of logical starts; also returns the window steps n (for valid rows)."""
+        low_B = self._low()[e_B]
+        count_B = self.count[e_B]
+        valid_B = (start_B >= low_B) & (start_B < count_B)
+        slot_B = start_B % self.capacity
+        flags_B = self.flags[e_B, slot_B]
+        t_B = self.t_ep[e_B, slot_B].astype(np.int64)
+        valid_B &= (flags_B & FINAL) == 0
+        # Rule 2: the stack rows of this episode must still be live.
+        valid_B &= start_B - np.minimum(t_B, self.frame_stack - 1) >= low_B
+        if stride > 1:
+            valid_B &= t_B % stride == 0
+        # Rule 3: the window rows and the bootstrap row must be written.
+        offsets_K = np.arange(k)
+        rows_BK = start_B[:, None] + offsets_K[None, :]
+        flags_BK = self.flags[e_B[:, None], rows_BK % self.capacity]
+        written_BK = rows_BK < count_B[:, None]
+        done_BK = ((flags_BK & (TERMINATED | TRUNCATED)) != 0) & written_BK
+        ended_before_BK = np.zeros_like(done_BK)
+        if k > 1:
+            ended_before_BK[:, 1:] = np.cumsum(done_BK[:, :-1], axis=1) > 0
+        steps_B = (~ended_before_BK).sum(axis=1)
+        valid_B &= start_B + steps_B < count_B  # bootstrap row exists
+        return valid_B, steps_B
+
+    def sample(
+        self,
+        batch_size: int,
+        *,
+        k: int = 1,
+        gamma: float = 0.99,
+        recent: int | None = None,
+        stride: int = 1,
+        max_tries: int = 100,
+    ) -> Batch:
+        """Uniform minibatch of valid k-step windows (rejection sampling, as in Dopamine).
+
+        ``recent``: draw only from the latest ``recent`` transitions over all streams.
+        """
+        if k < 1:
+            raise ConfigError(f"k must be >= 1 (got {k})")
+        if recent is not None and recent > self.capacity * self.num_envs:
+            raise ConfigError(
+                f"recent window ({recent}) exceeds the replay capacity "
+                f"({self.capacity * self.num_envs})"
+            )
+        window = self.capacity if recent is None else max(1, recent // self.num_envs)
+        low_E = np.maximum(self._low(), self.count - window)
+        span_E = self.count - low_E
+        if not (span_E > 0).any():
+            raise ValueError("cannot sample from an empty replay buffer")
+        chosen_e: list[np.ndarray] = []
+        chosen_l: list[np.ndarray] = []
+        chosen_n: list[np.ndarray] = []
+        have = 0
+        weights_E = span_E / span_E.sum()
+        for _ in range(max_tries):
+            need = batch_size - have
+            n_cand = max(2 * need, 8)
+            e_B = self.rng.choice(self.num_envs, size=n_cand, p=weights_E)
+            start_B = low_E[e_B] + (self.rng.random(n_cand) * span_E[e_B]).astype(np.int64)
+            ok_B, steps_B = self.valid_mask(e_B, start_B, k, stride)
+            idx = np.flatnonzero(ok_B)[:need]
+            chosen_e.append(e_B[idx])
+            chosen_l.append(start_B[idx])
+            chosen_n.append(steps_B[idx])
+            have += idx.size
+            if have == batch_size:
+                break
+        if have < batch_size:
+            raise ValueError(
+                "not enough valid transitions to sample from (need a complete k-step window); "
+                "collect more steps before learning"
+            )
+        e_B = np.concatenate(chosen_e)
+        start_B = np.concatenate(chosen_l)
+        return self._gather(e_B, start_B, k, gamma)
+
+    def _gather(self, e_B: np.ndarray, start_B: np.ndarray, k: int, gamma: float) -> Batch:
+        rows_BK = (start_B[:, None] + np.arange(k)[None, :]) % self.capacity
+        flags_BK = self.flags[e_B[:, None], rows_BK]
+        rewards_BK = self.rewards[e_B[:, None], rows_BK]
+        returns_B, steps_B, bootstrap_B = nstep_returns(
+            rewards_BK,
+            (flags_BK & TERMINATED) != 0,
+            (flags_BK & TRUNCATED) != 0,
+            gamma,
+        )
+        next_B = start_B + steps_B
+        slot_B = start_B % self.capacity
+        return Batch(
+            obs=self.stacked_obs(e_B, start_B),
+            actions=self.actions[e_B, slot_B],
+            returns=returns_B,
+            bootstrap=bootstrap_B,
+            next_obs=self.stacked_obs(e_B, next_B),
+            steps=steps_B,
+            env_index=e_B,
+            index=start_B,
+        )
+
+    def stacked_obs(self, e_B: np.ndarray, logical_B: np.ndarray) -> np.ndarray:
+        """Observation at logical rows, rebuilding frame stacks with zeros before episode start."""
+        slot_B = logical_B % self.capacity
+        if self.frame_stack == 1:
+            return self.frames[e_B, slot_B]
+        s = self.frame_stack
+        t_B = self.t_ep[e_B, slot_B].astype(np.int64)
+        back_S = np.arange(s - 1, -1, -1)  # oldest first
+        rows_BS = (logical_B[:, None] - back_S[None, :]) % self.capacity
+        out = self.frames[e_B[:, None], rows_BS]  # (B, S, *frame)
+        before_start_BS = back_S[None, :] > t_B[:, None]
+        out[before_start_BS] = 0
+        return out
+
+    def recent_indices(self, n: int) -> tuple[np.ndarray, np.ndarray]:
+        """(stream, logical index) of up to ``n`` most recent non-final live rows whose next row
+        exists: the D tuples of a posterior refresh (k-step windows are formed by the caller)."""
+        es, ls = [], []
+        per = max(1, n // self.num_envs)
+        low_E = np.maximum(self._low(), self.count - per)
+        for e in range(self.num_envs):
+            logical = np.arange(low_E[e], self.count[e], dtype=np.int64)
+            es.append(np.full(logical.shape, e, dtype=np.int64))
+            ls.append(logical)
+        return np.concatenate(es), np.concatenate(ls)
+
+    def sample_indices(
+        self, e_B: np.ndarray, start_B: np.ndarray, k: int, gamma: float, stride: int = 1
+    ) -> Batch:
+        """k-step batch at the given candidate starts, keeping only the valid ones."""
+        ok_B, _ = self.valid_mask(e_B, start_B, k, stride)
+        return self._gather(e_B[ok_B], start_B[ok_B], k, gamma)
+
+    # ------------------------------------------------------------------ checkpointing
+    def state_dict(self) -> dict[str, Any]:
+        state: dict[str, Any] = {
+            "frames": self.frames,
+            "actions": self.actions,
+            "rewards": self.rewards,
+            "flags": self.flags,
+            "t_ep": self.t_ep,
+            "count": self.count,
+            "episode_t": self.episode_t,
+            "floor": self.floor,
+            "rng": self.rng.bit_generator.state,
+        }
+        return state
+
+    def load_state_dict(self, state: dict[str, Any]) -> None:
+        for key in ("frames", "actions", "rewards", "flags", "t_ep"):
+            src = np.asarray(state[key])
+            if src.shape != getattr(self, key).shape:
+                raise ValueError(f"replay '{key}' has shape {src.shape}, expected {getattr(self, key).shape}")
+            getattr(self, key)[...] = src
+        self.count[...] = state["count"]
+        self.episode_t[...] = state["episode_t"]
+        self.floor[...] = state["floor"]
+        self.rng.bit_generator.state = state["rng"]
+

@@ -1,0 +1,156 @@
+"""Run directories: resolved config, metrics, TensorBoard events and atomic checkpoints."""
+
+from __future__ import annotations
+
+import csv
+import dataclasses
+import os
+import shutil
+from pathlib import Path
+from typing import Any
+
+import torch
+
+from farsighter.config import Config, load_config, save_config
+from farsighter.errors import RunDirError
+
+CONFIG_FILE = "config.json"
+CHECKPOINT_FILE = "checkpoint.pt"
+METRICS_FILE = "metrics.csv"
+EVAL_FILE = "eval.csv"
+SUMMARY_FILE = "summary.json"
+METRIC_COLUMNS = (
+    "global_step",
+    "episode",
+    "episodic_return",
+    "episodic_length",
+    "SPS",
+    "loss",
+    "epsilon",
+    "k",
+)
+EVAL_COLUMNS = ("global_step", "eval_return_mean", "eval_return_std", "eval_episodes")
+
+# Fields that may differ between the original command and its --resume.
+RESUMABLE_FIELDS = {"resume", "overwrite", "total_steps", "device", "progress", "run_dir", "torch_threads"}
+
+
+def prepare_run_dir(cfg: Config) -> Path:
+    """Create (or reopen with ``resume``) the run directory; never overwrite unless asked."""
+    path = cfg.resolved_run_dir
+    if cfg.resume and cfg.overwrite:
+        raise RunDirError("--resume and --overwrite exclude each other; pass one")
+    if cfg.resume:
+        if not (path / CONFIG_FILE).exists():
+            raise RunDirError(f"cannot resume: {path} holds no run (no {CONFIG_FILE})")
+        saved = load_config(path / CONFIG_FILE)
+        diffs = [
+            f"{f.name} (saved {getattr(saved, f.name)!r}, given {getattr(cfg, f.name)!r})"
+            for f in dataclasses.fields(Config)
+            if f.name not in RESUMABLE_FIELDS and getattr(saved, f.name) != getattr(cfg, f.name)
+        ]
+        if diffs:
+            raise RunDirError(
+                "cannot resume with a different config: " + "; ".join(diffs[:3])
+                + " (resume with the original flags, or use a new --run-dir)"
+            )
+        return path
+    if path.exists() and any(path.iterdir()):
+        if not cfg.overwrite:
+            raise RunDirError(
+                f"run directory {path} already exists; pass --resume to continue it or "
+                "--overwrite to replace it (or choose another --run-dir)"
+            )
+        shutil.rmtree(path)
+    path.mkdir(parents=True, exist_ok=True)
+    save_config(cfg, path / CONFIG_FILE)
+    return path
+
+
+def save_checkpoint(path: Path, state: dict[str, Any]) -> None:
+    """Write atomically: a crash mid-write leaves the previous checkpoint intact."""
+    tmp = path / (CHECKPOINT_FILE + ".tmp")
+    torch.save(state, tmp)
+    os.replace(tmp, path / CHECKPOINT_FILE)
+
+
+def load_checkpoint(path: Path) -> dict[str, Any]:
+    file = path / CHECKPOINT_FILE
+    if not file.exists():
+        raise RunDirError(f"cannot resume: no checkpoint in {path} (expected {CHECKPOINT_FILE})")
+    try:
+        state = torch.load(file, map_location="cpu", weights_only=False)
+    except Exception as exc:  # truncated/garbled files raise many different errors
+        raise RunDirError(
+            f"checkpoint {file} is corrupt or unreadable ({type(exc).__name__}); "
+            "delete it to restart from scratch with --overwrite"
+        ) from None
+    if not isinstance(state, dict) or "loop" not in state or "agent" not in state:
+        raise RunDirError(f"checkpoint {file} is not a farsighter checkpoint")
+    return state
+
+
+def truncate_csv(file: Path, max_step: int) -> None:
+    """Drop rows logged after ``max_step`` (work after the checkpoint is redone on resume)."""
+    if not file.exists():
+        return
+    with file.open(newline="") as fh:
+        rows = list(csv.reader(fh))
+    if not rows:
+        return
+    header, body = rows[0], rows[1:]
+    kept = [r for r in body if r and int(float(r[0])) <= max_step]
+    with file.open("w", newline="") as fh:
+        writer = csv.writer(fh)
+        writer.writerow(header)
+        writer.writerows(kept)
+
+
+class CsvLog:
+    """Append-only CSV with a fixed header."""
+
+    def __init__(self, file: Path, columns: tuple[str, ...]) -> None:
+        self.columns = columns
+        new = not file.exists()
+        self.fh = file.open("a", newline="")
+        self.writer = csv.writer(self.fh)
+        if new:
+            self.writer.writerow(columns)
+            self.fh.flush()
+
+    def write(self, row: dict[str, Any]) -> None:
+        self.writer.writerow([_fmt(row.get(c, "")) for c in self.columns])
+        self.fh.flush()
+
+    def close(self) -> None:
+        self.fh.close()
+
+
+def _fmt(value: Any) -> Any:
+    if isinstance(value, float):
+        return f"{value:.6g}"
+    return value
+
+
+class RunLogger:
+    """Metrics CSV, evaluation CSV and TensorBoard events under fixed namespaces
+    (``charts/``, ``losses/``, ``eval/``), reopened consistently on resume."""
+
+    def __init__(self, path: Path, resume_step: int | None) -> None:
+        from torch.utils.tensorboard import SummaryWriter
+
+        if resume_step is not None:
+            truncate_csv(path / METRICS_FILE, resume_step)
+            truncate_csv(path / EVAL_FILE, resume_step)
+        self.metrics = CsvLog(path / METRICS_FILE, METRIC_COLUMNS)
+        self.eval = CsvLog(path / EVAL_FILE, EVAL_COLUMNS)
+        # purge_step discards events written after the checkpoint by the interrupted process.
+        self.tb = SummaryWriter(str(path), purge_step=resume_step)
+
+    def scalar(self, tag: str, value: float, step: int) -> None:
+        self.tb.add_scalar(tag, value, step)
+
+    def close(self) -> None:
+        self.metrics.close()
+        self.eval.close()
+        self.tb.close()
