@@ -23,7 +23,15 @@ from farsighter.errors import ConfigError
 ALGORITHMS: tuple[str, ...] = ("ddqn", "kddqn", "bdqn", "farsighter")
 """Algorithms this version can train (SPEC section 2 lists the full family)."""
 
-PLANNED_ALGORITHMS: tuple[str, ...] = ("ob2i", "rnd", "krnd", "naf", "knaf", "bnaf", "farsighter-naf")
+PLANNED_ALGORITHMS: tuple[str, ...] = (
+    "ob2i",
+    "rnd",
+    "krnd",
+    "naf",
+    "knaf",
+    "bnaf",
+    "farsighter-naf",
+)
 """Algorithms of the paper that are specified but not yet implemented in this version."""
 
 
@@ -467,7 +475,11 @@ def config_from_dict(data: dict[str, Any]) -> Config:
             if f.name not in values:
                 continue
             value = values[f.name]
-            if dataclasses.is_dataclass(f.default_factory) if callable(f.default_factory) else False:
+            if (
+                dataclasses.is_dataclass(f.default_factory)
+                if callable(f.default_factory)
+                else False
+            ):
                 value = build(f.default_factory, value)
             elif isinstance(value, list):
                 value = tuple(value)

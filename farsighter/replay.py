@@ -106,7 +106,9 @@ class ReplayBuffer:
     # ------------------------------------------------------------------ writing
     @property
     def nbytes(self) -> int:
-        return sum(a.nbytes for a in (self.frames, self.actions, self.rewards, self.flags, self.t_ep))
+        return sum(
+            a.nbytes for a in (self.frames, self.actions, self.rewards, self.flags, self.t_ep)
+        )
 
     def __len__(self) -> int:
         """Live rows over all streams (final rows included)."""
@@ -314,10 +316,11 @@ class ReplayBuffer:
         for key in ("frames", "actions", "rewards", "flags", "t_ep"):
             src = np.asarray(state[key])
             if src.shape != getattr(self, key).shape:
-                raise ValueError(f"replay '{key}' has shape {src.shape}, expected {getattr(self, key).shape}")
+                raise ValueError(
+                    f"replay '{key}' has shape {src.shape}, expected {getattr(self, key).shape}"
+                )
             getattr(self, key)[...] = src
         self.count[...] = state["count"]
         self.episode_t[...] = state["episode_t"]
         self.floor[...] = state["floor"]
         self.rng.bit_generator.state = state["rng"]
-

@@ -32,7 +32,15 @@ METRIC_COLUMNS = (
 EVAL_COLUMNS = ("global_step", "eval_return_mean", "eval_return_std", "eval_episodes")
 
 # Fields that may differ between the original command and its --resume.
-RESUMABLE_FIELDS = {"resume", "overwrite", "total_steps", "device", "progress", "run_dir", "torch_threads"}
+RESUMABLE_FIELDS = {
+    "resume",
+    "overwrite",
+    "total_steps",
+    "device",
+    "progress",
+    "run_dir",
+    "torch_threads",
+}
 
 
 def prepare_run_dir(cfg: Config) -> Path:
@@ -51,7 +59,8 @@ def prepare_run_dir(cfg: Config) -> Path:
         ]
         if diffs:
             raise RunDirError(
-                "cannot resume with a different config: " + "; ".join(diffs[:3])
+                "cannot resume with a different config: "
+                + "; ".join(diffs[:3])
                 + " (resume with the original flags, or use a new --run-dir)"
             )
         return path

@@ -113,13 +113,19 @@ def train(cfg: Config) -> dict[str, Any]:
     agent = build_agent(cfg, obs_space, act_space, frame_stack=frame_stack_of(cfg), device=device)
     eval_env = make_env(cfg, seed=cfg.seed + 1_000_003, training=False)
     state = LoopState()
+    resumed_loss = float("nan")
     obs: np.ndarray
     if checkpoint is not None:
         agent.load_state_dict(checkpoint["agent"])
         loop = checkpoint["loop"]
-        state.global_step, state.episodes, state.evals = loop["global_step"], loop["episodes"], loop["evals"]
+        state.global_step, state.episodes, state.evals = (
+            loop["global_step"],
+            loop["episodes"],
+            loop["evals"],
+        )
         state.best_eval, state.last_eval = loop["best_eval"], loop["last_eval"]
         state.recent_returns.extend(loop["recent_returns"])
+        resumed_loss = loop.get("loss_value", float("nan"))
         if checkpoint.get("envs") is not None:
             envs.close()
             envs = pickle.loads(checkpoint["envs"])
@@ -139,7 +145,8 @@ def train(cfg: Config) -> dict[str, Any]:
         mininterval=1.0,
         desc=f"{cfg.algo} {cfg.env} s{cfg.seed}",
     )
-    sps, loss_value = 0.0, float("nan")
+    sps = 0.0
+    loss_value = resumed_loss
     window_start_step, window_start_time = state.global_step, time.perf_counter()
     start_time, start_step = time.perf_counter(), state.global_step
     last_loss: torch.Tensor | None = None
@@ -157,6 +164,7 @@ def train(cfg: Config) -> dict[str, Any]:
                     "best_eval": state.best_eval,
                     "last_eval": state.last_eval,
                     "recent_returns": list(state.recent_returns),
+                    "loss_value": loss_value,
                 },
                 "agent": agent.state_dict(include_replay=cfg.save_replay),
                 # Environment state only travels with the replay, whose rows it continues.
@@ -168,7 +176,12 @@ def train(cfg: Config) -> dict[str, Any]:
     def run_eval() -> None:
         state.evals += 1
         returns = evaluate(
-            agent, cfg, eval_env, cfg.eval_episodes, cfg.seed + 7919 * state.evals, state.global_step
+            agent,
+            cfg,
+            eval_env,
+            cfg.eval_episodes,
+            cfg.seed + 7919 * state.evals,
+            state.global_step,
         )
         mean, std = float(np.mean(returns)), float(np.std(returns))
         state.last_eval, state.best_eval = mean, max(state.best_eval, mean)
@@ -187,7 +200,9 @@ def train(cfg: Config) -> dict[str, Any]:
         while state.global_step < cfg.total_steps:
             actions = agent.act(obs, state.global_step)
             next_obs, rewards, terminated, truncated, info = envs.step(actions)
-            agent.observe(obs, actions, rewards, terminated, truncated, _final_obs(info, cfg.num_envs))
+            agent.observe(
+                obs, actions, rewards, terminated, truncated, _final_obs(info, cfg.num_envs)
+            )
             obs = next_obs
             prev_step = state.global_step
             state.global_step += cfg.num_envs
@@ -258,7 +273,9 @@ def train(cfg: Config) -> dict[str, Any]:
         "episodes": state.episodes,
         "final_eval_return": state.last_eval,
         "best_eval_return": state.best_eval,
-        "mean_recent_return": float(np.mean(state.recent_returns)) if state.recent_returns else None,
+        "mean_recent_return": float(np.mean(state.recent_returns))
+        if state.recent_returns
+        else None,
         "wall_seconds": elapsed,
         "sps": (state.global_step - start_step) / max(elapsed, 1e-9),
         "run_dir": str(path),
@@ -290,7 +307,10 @@ def load_agent(run_dir: str | Path, device: str = "cpu") -> Policy:
     cfg = load_config(path / CONFIG_FILE)
     env = make_env(cfg, seed=0)
     agent = build_agent(
-        cfg, env.observation_space, env.action_space, frame_stack=frame_stack_of(cfg),
+        cfg,
+        env.observation_space,
+        env.action_space,
+        frame_stack=frame_stack_of(cfg),
         device=resolve_device(device),
     )
     env.close()

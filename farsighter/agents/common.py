@@ -94,10 +94,6 @@ def updates_due(global_step: int, cfg: Config, done: int) -> int:
     return max(0, total - done)
 
 
-def rng_state(rng: np.random.Generator) -> dict[str, Any]:
-    return rng.bit_generator.state
-
-
 def build_seeded(seed: int, fn: Any) -> Any:
     """Run ``fn`` with torch's global RNG seeded, without leaking that state to the caller."""
     with torch.random.fork_rng(devices=[]):

@@ -61,8 +61,8 @@ class DDQNAgent:
             return self.greedy(obs_E)
         cfg = self.cfg
         self.epsilon = linear_schedule(cfg.eps_start, cfg.eps_end, cfg.eps_decay_steps, global_step)
-        random_E = self.rng.random(n) < self.epsilon
-        random_actions_E = self.rng.integers(0, self.num_actions, size=n)
+        random_E = np.asarray(self.rng.random(n) < self.epsilon)
+        random_actions_E = np.asarray(self.rng.integers(0, self.num_actions, size=n))
         if random_E.all():  # no forward pass needed
             return random_actions_E
         return np.where(random_E, random_actions_E, self.greedy(obs_E))

@@ -3,9 +3,11 @@
 from __future__ import annotations
 
 import importlib
+from functools import partial
 from typing import Any
 
 import gymnasium as gym
+
 from farsighter.config import Config, is_atari_id
 from farsighter.errors import EnvError
 
@@ -83,13 +85,11 @@ def make_vector_env(cfg: Config, *, seed: int) -> gym.vector.SyncVectorEnv:
     """Training environments, stepped together; an ended episode resets in the same step and its
     last observation is in ``info["final_obs"]`` (needed to bootstrap after truncation)."""
 
-    def thunk(i: int) -> Any:
-        return lambda: make_env(cfg, seed=seed + i, training=True)
-
     # Build one first so that a bad id fails with our one-line error, not inside the vector env.
     make_env(cfg, seed=seed, training=True).close()
     return gym.vector.SyncVectorEnv(
-        [thunk(i) for i in range(cfg.num_envs)],
+        # partials (not lambdas) keep the vector env picklable, so checkpoints can hold it.
+        [partial(make_env, cfg, seed=seed + i, training=True) for i in range(cfg.num_envs)],
         autoreset_mode=gym.vector.AutoresetMode.SAME_STEP,
     )
 
@@ -105,7 +105,7 @@ def check_spaces(algo: str, obs_space: gym.Space, act_space: gym.Space) -> None:
     if algo in discrete_algos and not isinstance(act_space, gym.spaces.Discrete):
         raise EnvError(
             f"algorithm '{algo}' needs a discrete action space; this environment has {act_space} "
-            "(continuous algorithms: naf, knaf, bnaf, farsighter-naf)"
+            "(continuous agents naf, knaf, bnaf, farsighter-naf are planned)"
         )
     if not isinstance(obs_space, gym.spaces.Box):
         raise EnvError(
@@ -117,4 +117,3 @@ def check_spaces(algo: str, obs_space: gym.Space, act_space: gym.Space) -> None:
             f"observation shape {obs_space.shape} is not supported; accepted: flat vectors (D,) "
             "or stacked images (C, H, W)"
         )
-

@@ -1,0 +1,3 @@
+from farsighter.cli import main
+
+raise SystemExit(main())

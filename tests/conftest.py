@@ -1,0 +1,42 @@
+"""Shared fixtures: tiny configs that run in seconds on 2 cores."""
+
+from __future__ import annotations
+
+from pathlib import Path
+from typing import Any
+
+import pytest
+import torch
+
+from farsighter.config import Config, make_config
+
+torch.set_num_threads(1)
+
+
+def tiny(algo: str, run_dir: Path, env: str = "CartPole-v1", **kw: Any) -> Config:
+    values: dict[str, Any] = dict(
+        total_steps=1_500,
+        learning_starts=200,
+        buffer_size=5_000,
+        batch_size=16,
+        train_every=2,
+        target_update_every=250,
+        eps_decay_steps=1_000,
+        eval_every=500,
+        eval_episodes=2,
+        eval_max_steps=200,
+        checkpoint_every=500,
+        log_every=250,
+        hidden_sizes=(32, 32),
+        progress=False,
+        run_dir=str(run_dir),
+        blr__posterior_every=400,
+        blr__posterior_samples=500,
+    )
+    values.update(kw)
+    return make_config(algo, env, preset="control", **values)
+
+
+@pytest.fixture
+def tiny_config() -> Any:
+    return tiny

@@ -1,0 +1,104 @@
+"""The command line: a tiny run end to end, and one clear line + exit 2 for bad input."""
+
+from __future__ import annotations
+
+import json
+import subprocess
+import sys
+from pathlib import Path
+
+import pytest
+
+TINY = [
+    "--total-steps",
+    "400",
+    "--learning-starts",
+    "100",
+    "--eval-every",
+    "200",
+    "--eval-episodes",
+    "1",
+    "--no-progress",
+    "--hidden-sizes",
+    "16",
+    "16",
+]
+
+
+def run_cli(*args: str, cwd: Path) -> subprocess.CompletedProcess[str]:
+    return subprocess.run(
+        [sys.executable, "-m", "farsighter", *args],
+        cwd=cwd,
+        capture_output=True,
+        text=True,
+        timeout=300,
+    )
+
+
+def test_train_eval_and_presets(tmp_path: Path) -> None:
+    res = run_cli(
+        "train",
+        "--algo",
+        "farsighter",
+        "--env",
+        "CartPole-v1",
+        "--preset",
+        "cartpole",
+        "--k",
+        "5",
+        "--blr.prior-std",
+        "0.5",
+        "--run-dir",
+        "run",
+        *TINY,
+        cwd=tmp_path,
+    )
+    assert res.returncode == 0, res.stderr
+    summary = json.loads(res.stdout)
+    assert summary["global_step"] == 400
+    saved = json.loads((tmp_path / "run" / "config.json").read_text())
+    assert saved["k"] == 5 and saved["blr"]["prior_std"] == 0.5 and saved["preset"] == "cartpole"
+    assert saved["optimizer"] == "adam"  # from the preset, not overridden
+    res = run_cli("eval", "run", "--episodes", "2", cwd=tmp_path)
+    assert res.returncode == 0, res.stderr
+    assert len(json.loads(res.stdout)["returns"]) == 2
+    res = run_cli("presets", cwd=tmp_path)
+    assert "Table 1" in res.stdout and "kazizzad/BDQN-MxNet-Gluon" in res.stdout
+
+
+@pytest.mark.parametrize(
+    ("args", "needle"),
+    [
+        (["--algo", "dqn-x"], "unknown algorithm 'dqn-x'; accepted: ddqn"),
+        (["--env", "NoSuchEnv-v0"], "cannot make environment 'NoSuchEnv-v0'"),
+        (["--env", "nosuchmodule:Foo-v0"], "cannot make environment"),
+        (["--k", "0"], "k must be an integer >= 1"),
+        (["--lr", "-1"], "lr must be > 0"),
+        (["--buffer-size", "0"], "buffer_size must be > 0"),
+        (["--batch-size", "64", "--buffer-size", "32"], "must not exceed buffer_size"),
+        (["--env", "Pendulum-v1"], "needs a discrete action space"),
+        (["--preset", "nope"], "unknown preset 'nope'; accepted: auto"),
+    ],
+)
+def test_bad_input_is_one_line_exit_2(tmp_path: Path, args: list[str], needle: str) -> None:
+    res = run_cli(
+        "train", *args, "--run-dir", "run", "--total-steps", "10", "--no-progress", cwd=tmp_path
+    )
+    assert res.returncode == 2
+    lines = res.stderr.strip().splitlines()
+    assert len(lines) == 1 and needle in lines[0], res.stderr
+    assert "Traceback" not in res.stderr
+    assert not (tmp_path / "run").exists()  # nothing created
+
+
+def test_existing_run_dir_is_never_overwritten_without_asking(tmp_path: Path) -> None:
+    assert run_cli("train", "--run-dir", "run", *TINY, cwd=tmp_path).returncode == 0
+    before = (tmp_path / "run" / "metrics.csv").read_text()
+    res = run_cli("train", "--run-dir", "run", *TINY, cwd=tmp_path)
+    assert res.returncode == 2 and "already exists" in res.stderr
+    assert (tmp_path / "run" / "metrics.csv").read_text() == before
+    (tmp_path / "run" / "checkpoint.pt").write_bytes(b"\x00garbage")
+    res = run_cli("train", "--run-dir", "run", *TINY, "--resume", cwd=tmp_path)
+    assert res.returncode == 2 and "corrupt" in res.stderr and "Traceback" not in res.stderr
+    res = run_cli("train", "--run-dir", "run", *TINY, "--overwrite", cwd=tmp_path)
+    assert res.returncode == 0, res.stderr

@@ -1,0 +1,52 @@
+"""k-step returns at terminals and truncations; the double-Q target of Eq. 2."""
+
+import numpy as np
+import torch
+
+from farsighter.ops.targets import double_q_target, nstep_returns
+
+G = 0.9
+
+
+def test_full_window_no_episode_end() -> None:
+    r = np.array([[1.0, 2.0, 3.0]])
+    z = np.zeros_like(r, dtype=bool)
+    ret, n, boot = nstep_returns(r, z, z, G)
+    assert np.isclose(ret[0], 1 + G * 2 + G**2 * 3)
+    assert n[0] == 3 and np.isclose(boot[0], G**3)
+
+
+def test_terminal_inside_window_stops_sum_and_bootstrap() -> None:
+    r = np.array([[1.0, 2.0, 100.0, 5.0]])
+    term = np.array([[False, True, False, False]])
+    trunc = np.zeros_like(term)
+    ret, n, boot = nstep_returns(r, term, trunc, G)
+    assert np.isclose(ret[0], 1 + G * 2)  # nothing from the next episode
+    assert n[0] == 2 and boot[0] == 0.0  # a terminal state gets no bootstrap
+
+
+def test_truncation_inside_window_bootstraps_with_gamma_j() -> None:
+    r = np.array([[1.0, 2.0, 100.0]])
+    term = np.zeros((1, 3), dtype=bool)
+    trunc = np.array([[False, True, False]])
+    ret, n, boot = nstep_returns(r, term, trunc, G)
+    assert np.isclose(ret[0], 1 + G * 2)
+    assert n[0] == 2 and np.isclose(boot[0], G**2)
+
+
+def test_terminal_on_first_step_and_k1() -> None:
+    r = np.array([[7.0, 1.0], [3.0, 4.0]])
+    term = np.array([[True, False], [False, False]])
+    ret, n, boot = nstep_returns(r, term, np.zeros_like(term), G)
+    assert np.allclose(ret, [7.0, 3 + G * 4]) and list(n) == [1, 2]
+    assert np.allclose(boot, [0.0, G**2])
+    ret1, n1, boot1 = nstep_returns(r[:, :1], term[:, :1], np.zeros((2, 1), bool), G)
+    assert np.allclose(ret1, [7.0, 3.0]) and np.allclose(boot1, [0.0, G])
+
+
+def test_double_q_target_uses_online_argmax_and_target_value() -> None:
+    q_online = torch.tensor([[1.0, 5.0, 2.0], [9.0, 0.0, 1.0]])
+    q_target = torch.tensor([[10.0, -1.0, 30.0], [2.0, 50.0, 60.0]])
+    y = double_q_target(torch.tensor([1.0, 2.0]), torch.tensor([0.5, 0.0]), q_online, q_target)
+    # row 0: online argmax is action 1, valued by the target net at -1 (not max 30)
+    assert torch.allclose(y, torch.tensor([1.0 + 0.5 * -1.0, 2.0]))
