@@ -150,6 +150,8 @@ def train(cfg: Config) -> dict[str, Any]:
     window_start_step, window_start_time = state.global_step, time.perf_counter()
     start_time, start_step = time.perf_counter(), state.global_step
     last_loss: torch.Tensor | None = None
+    # Training-phase throughput: measured from the first step at or after learning_starts.
+    train_phase: tuple[int, float] | None = None
     next_log = (state.global_step // cfg.log_every + 1) * cfg.log_every
 
     def checkpoint_now() -> None:
@@ -208,6 +210,8 @@ def train(cfg: Config) -> dict[str, Any]:
             state.global_step += cfg.num_envs
             bar.update(cfg.num_envs)
 
+            if train_phase is None and state.global_step >= cfg.learning_starts:
+                train_phase = (state.global_step, time.perf_counter())
             metrics = agent.learn(state.global_step)
             if "td_loss" in metrics:
                 last_loss = metrics["td_loss"]
@@ -254,6 +258,7 @@ def train(cfg: Config) -> dict[str, Any]:
                 and state.global_step < cfg.total_steps
             ):
                 checkpoint_now()
+        loop_end = time.perf_counter()
         if state.evals == 0 or (cfg.eval_every and state.global_step % cfg.eval_every):
             run_eval()  # always finish with an evaluation
         checkpoint_now()
@@ -264,7 +269,14 @@ def train(cfg: Config) -> dict[str, Any]:
         envs.close()
         eval_env.close()
 
-    elapsed = time.perf_counter() - start_time
+    end_time = time.perf_counter()
+    elapsed = end_time - start_time
+    # Periodic evaluations and checkpoints count against it; the final ones do not.
+    train_sps = (
+        (state.global_step - train_phase[0]) / max(loop_end - train_phase[1], 1e-9)
+        if train_phase is not None and state.global_step > train_phase[0]
+        else float("nan")
+    )
     summary = {
         "algo": cfg.algo,
         "env": cfg.env,
@@ -278,6 +290,7 @@ def train(cfg: Config) -> dict[str, Any]:
         else None,
         "wall_seconds": elapsed,
         "sps": (state.global_step - start_step) / max(elapsed, 1e-9),
+        "train_phase_sps": train_sps,
         "run_dir": str(path),
     }
     (path / SUMMARY_FILE).write_text(json.dumps(summary, indent=2) + "\n")

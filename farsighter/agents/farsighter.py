@@ -10,7 +10,10 @@ Q(s, a) = phi_theta(s)^T w_a with a Bayesian linear regression posterior over ea
   line 4) when ``sample_recent``. Target network and target mean are copied every N steps.
 * Posterior (Algorithm 1 line 6): every M steps, from up to D recent tuples with features of the
   current theta and targets y from the target network exactly as in Eq. 8 (batch mode), or from
-  running sufficient statistics fed with each new transition once (incremental mode).
+  running sufficient statistics (incremental mode, the online update the paper's appendix 10
+  names as the remedy for the rescan): every representation update adds its minibatch's
+  features and Eq. 8 targets, which it computes anyway, weighted train_every / batch_size so that
+  one environment step contributes unit weight on average; a refresh then costs O(|A| d^3).
 * Adaptive k (Algorithm 1 line 7): after each refresh, the Q-variance (mean of
   phi^T Cov_a phi at the greedy action over the refresh states) moves k by one towards the
   variance target; the replay is emptied when k changes (optional).
@@ -95,7 +98,8 @@ class FarsighterAgent:
         self.refreshes = 0
         self.draws = 0  # Thompson draws made (one per acting step with redraw=step)
         self.q_variance = float("nan")
-        self.accumulated_to = np.zeros(cfg.num_envs, dtype=np.int64)  # incremental mode cursor
+        # Incremental mode: recent minibatch features, for the Q-variance of adaptive k.
+        self.recent_phi: torch.Tensor | None = None
         # Per-environment weight draws for redraw = every / episode.
         self.w_EAD: torch.Tensor | None = None
         self.redraw_E = np.ones(cfg.num_envs, dtype=bool)
@@ -201,52 +205,59 @@ class FarsighterAgent:
             return None
         t = batch_tensors(batch, self.device)
         y_B = self._targets(t)
-        q_B = (self.torso(t["obs"]) @ self.head.mean_AD.T).gather(1, t["actions"][:, None])[:, 0]
+        phi_BD = self.torso(t["obs"])
+        q_B = (phi_BD @ self.head.mean_AD.T).gather(1, t["actions"][:, None])[:, 0]
         loss = td_loss(q_B, y_B, self.cfg.loss)
         clip_and_step(loss, list(self.torso.parameters()), self.opt, self.cfg.max_grad_norm)
+        if self.cfg.blr.mode == "incremental":
+            self._accumulate(phi_BD.detach(), t["actions"], y_B)
         return loss.detach()
+
+    def _accumulate(self, phi_BD: torch.Tensor, a_B: torch.Tensor, y_B: torch.Tensor) -> None:
+        """Add a minibatch to the running statistics with weight w = train_every / batch_size
+        (scaling phi and y by sqrt(w) scales Phi Phi^T and Phi y by w)."""
+        root_w = (self.cfg.train_every / self.cfg.batch_size) ** 0.5
+        self.head.accumulate(phi_BD * root_w, a_B, y_B * root_w)
+        keep = 2_048
+        rows = phi_BD if self.recent_phi is None else torch.cat([self.recent_phi, phi_BD])
+        self.recent_phi = rows[-keep:]
 
     @torch.no_grad()
     def _features_and_targets(
-        self, batch: Batch
+        self, e_N: np.ndarray, l_N: np.ndarray
     ) -> tuple[torch.Tensor, torch.Tensor, torch.Tensor]:
-        phis, ys = [], []
-        n = len(batch.actions)
-        for lo in range(0, n, FEATURE_CHUNK):
-            sl = slice(lo, lo + FEATURE_CHUNK)
-            part = Batch(
-                obs=batch.obs[sl],
-                actions=batch.actions[sl],
-                returns=batch.returns[sl],
-                bootstrap=batch.bootstrap[sl],
-                next_obs=batch.next_obs[sl],
-                steps=batch.steps[sl],
-                env_index=batch.env_index[sl],
-                index=batch.index[sl],
+        """Features of the current theta and Eq. 8 targets of the valid k-step tuples starting at
+        the given rows, gathered chunk by chunk (stacked frames are never all in memory)."""
+        phis, actions, ys = [], [], []
+        for lo in range(0, len(e_N), FEATURE_CHUNK):
+            part = self.replay.sample_indices(
+                e_N[lo : lo + FEATURE_CHUNK], l_N[lo : lo + FEATURE_CHUNK], self.k, self.cfg.gamma
             )
+            if len(part.actions) == 0:
+                continue
             t = batch_tensors(part, self.device)
             phis.append(self.torso(t["obs"]))
+            actions.append(t["actions"])
             ys.append(self._targets(t))
-        actions = torch.as_tensor(batch.actions, device=self.device, dtype=torch.int64)
-        return torch.cat(phis), actions, torch.cat(ys)
+        if not phis:
+            empty = torch.zeros(0, device=self.device)
+            return empty, empty.long(), empty
+        return torch.cat(phis), torch.cat(actions), torch.cat(ys)
 
     def refresh_posterior(self) -> None:
         """Algorithm 1 line 6 (and line 7 with adaptive k)."""
         cfg = self.cfg
         if cfg.blr.mode == "batch":
             e_N, l_N = self.replay.recent_indices(cfg.blr.posterior_samples)
-            batch = self.replay.sample_indices(e_N, l_N, self.k, cfg.gamma)
-            if len(batch.actions) == 0:
+            phi_ND, a_N, y_N = self._features_and_targets(e_N, l_N)
+            if len(a_N) == 0:
                 return
-            phi_ND, a_N, y_N = self._features_and_targets(batch)
             self.head.fit(phi_ND, a_N, y_N)  # statistics reset each refresh, as in BDQN's code
-        else:
-            batch = self._new_transitions()
-            if len(batch.actions) == 0:
+        else:  # the statistics are already up to date: no features are recomputed
+            if self.recent_phi is None:
                 return
-            phi_ND, a_N, y_N = self._features_and_targets(batch)
-            self.head.accumulate(phi_ND, a_N, y_N)
             self.head.refresh()
+            phi_ND = self.recent_phi
         self.q_variance = greedy_predictive_variance(self.head, phi_ND)
         ak = cfg.adaptive_k
         if ak.enabled:
@@ -255,23 +266,6 @@ class FarsighterAgent:
                 self.k = new_k
                 if ak.empty_buffer:
                     self.replay.clear()
-                    self.accumulated_to = self.replay.count.copy()
-
-    def _new_transitions(self) -> Batch:
-        """Incremental mode: every transition enters the statistics once, when its k-step window
-        is complete (no rescan of the buffer)."""
-        es, ls = [], []
-        low_E = np.maximum(self.accumulated_to, self.replay.count - self.replay.capacity)
-        low_E = np.maximum(low_E, self.replay.floor)
-        for e in range(self.replay.num_envs):
-            hi = int(self.replay.count[e]) - self.k  # windows starting here are complete
-            logical = np.arange(low_E[e], max(hi, low_E[e]), dtype=np.int64)
-            es.append(np.full(logical.shape, e, dtype=np.int64))
-            ls.append(logical)
-            self.accumulated_to[e] = max(hi, low_E[e])
-        return self.replay.sample_indices(
-            np.concatenate(es), np.concatenate(ls), self.k, self.cfg.gamma
-        )
 
     def diagnostics(self) -> dict[str, float]:
         return {
@@ -301,7 +295,7 @@ class FarsighterAgent:
                 "q_variance": self.q_variance,
                 "steps_since_draw": self.steps_since_draw,
                 "redraw": self.redraw_E.copy(),
-                "accumulated_to": self.accumulated_to.copy(),
+                "recent_phi": self.recent_phi,
             },
             "replay": self.replay.state_dict() if include_replay else None,
         }
@@ -320,6 +314,6 @@ class FarsighterAgent:
         self.refreshes, self.draws, self.q_variance = c["refreshes"], c["draws"], c["q_variance"]
         self.steps_since_draw = c["steps_since_draw"]
         self.redraw_E[...] = c["redraw"]
-        self.accumulated_to[...] = c["accumulated_to"]
+        self.recent_phi = c["recent_phi"]
         if state.get("replay") is not None:
             self.replay.load_state_dict(state["replay"])
