@@ -18,25 +18,43 @@ from benchmarks.common import write_result
 ALGO_OVERRIDES: dict[str, dict[str, Any]] = {"kddqn": {"k": 3}, "farsighter": {"k": 3}}
 
 
-def run_one(algo: str, seed: int, env: str, steps: int, preset: str, threshold: float) -> dict[str, Any]:
+def run_one(
+    algo: str, seed: int, env: str, steps: int, preset: str, threshold: float
+) -> dict[str, Any]:
     import torch
 
     from farsighter import make_config, train
 
     torch.set_num_threads(1)
     with tempfile.TemporaryDirectory() as tmp:
-        cfg = make_config(algo, env, preset=preset, seed=seed, total_steps=steps,
-                          eval_every=5_000, eval_episodes=10, progress=False,
-                          run_dir=f"{tmp}/run", **ALGO_OVERRIDES.get(algo, {}))
+        cfg = make_config(
+            algo,
+            env,
+            preset=preset,
+            seed=seed,
+            total_steps=steps,
+            eval_every=5_000,
+            eval_episodes=10,
+            progress=False,
+            run_dir=f"{tmp}/run",
+            **ALGO_OVERRIDES.get(algo, {}),
+        )
         summary = train(cfg)
         with (Path(tmp) / "run" / "eval.csv").open() as fh:
-            evals = [(int(r["global_step"]), float(r["eval_return_mean"])) for r in csv.DictReader(fh)]
+            evals = [
+                (int(r["global_step"]), float(r["eval_return_mean"])) for r in csv.DictReader(fh)
+            ]
     first = next((s for s, m in evals if m >= threshold), None)
     return {
-        "algo": algo, "seed": seed, "k": cfg.k,
-        "best_eval": max(m for _, m in evals), "final_eval": evals[-1][1],
-        "first_step_reaching_threshold": first, "reached": first is not None,
-        "evals": evals, "wall_seconds": summary["wall_seconds"],
+        "algo": algo,
+        "seed": seed,
+        "k": cfg.k,
+        "best_eval": max(m for _, m in evals),
+        "final_eval": evals[-1][1],
+        "first_step_reaching_threshold": first,
+        "reached": first is not None,
+        "evals": evals,
+        "wall_seconds": summary["wall_seconds"],
     }
 
 
@@ -53,8 +71,10 @@ def main() -> None:
     args = parser.parse_args()
     jobs = [(a, s) for a in args.algos for s in args.seeds]
     with ProcessPoolExecutor(args.workers) as pool:
-        futures = [pool.submit(run_one, a, s, args.env, args.steps, args.preset, args.threshold)
-                   for a, s in jobs]
+        futures = [
+            pool.submit(run_one, a, s, args.env, args.steps, args.preset, args.threshold)
+            for a, s in jobs
+        ]
         runs = [f.result() for f in futures]
     table = {
         a: {
@@ -62,13 +82,23 @@ def main() -> None:
             "of": sum(r["algo"] == a for r in runs),
             "best_eval": [r["best_eval"] for r in runs if r["algo"] == a],
             "final_eval": [r["final_eval"] for r in runs if r["algo"] == a],
-            "first_step_reaching_threshold": [r["first_step_reaching_threshold"] for r in runs
-                                              if r["algo"] == a],
+            "first_step_reaching_threshold": [
+                r["first_step_reaching_threshold"] for r in runs if r["algo"] == a
+            ],
         }
         for a in args.algos
     }
-    write_result(args.name, {"env": args.env, "steps": args.steps, "preset": args.preset,
-                             "threshold": args.threshold, "summary": table, "runs": runs})
+    write_result(
+        args.name,
+        {
+            "env": args.env,
+            "steps": args.steps,
+            "preset": args.preset,
+            "threshold": args.threshold,
+            "summary": table,
+            "runs": runs,
+        },
+    )
 
 
 if __name__ == "__main__":

@@ -24,17 +24,25 @@ from farsighter.agents.farsighter import FarsighterAgent
 def build(mode: str, samples: int, threads: int) -> FarsighterAgent:
     torch.set_num_threads(threads)
     cfg = make_config(
-        "farsighter", "ALE/MontezumaRevenge-v5", buffer_size=samples + 1_000,
-        blr__posterior_samples=samples, blr__mode=mode, k=1, device="cpu",
+        "farsighter",
+        "ALE/MontezumaRevenge-v5",
+        buffer_size=samples + 1_000,
+        blr__posterior_samples=samples,
+        blr__mode=mode,
+        k=1,
+        device="cpu",
     )
     obs_space = gym.spaces.Box(0, 255, (4, 84, 84), np.uint8)
-    agent = FarsighterAgent(cfg, obs_space, gym.spaces.Discrete(18), frame_stack=4,
-                            device=torch.device("cpu"))
+    agent = FarsighterAgent(
+        cfg, obs_space, gym.spaces.Discrete(18), frame_stack=4, device=torch.device("cpu")
+    )
     rng = np.random.default_rng(0)
     frame = np.zeros((1, 4, 84, 84), np.uint8)
     no = np.zeros(1, dtype=bool)
     for i in range(samples + 500):
-        frame[0, -1] = rng.integers(0, 255, size=(84, 84), dtype=np.uint8) if i < 64 else frame[0, -1]
+        frame[0, -1] = (
+            rng.integers(0, 255, size=(84, 84), dtype=np.uint8) if i < 64 else frame[0, -1]
+        )
         frame[0, -1, i % 84, :] = i % 255  # distinct frames without 100k random draws
         agent.observe(frame, np.array([i % 18]), np.array([0.0]), no, no, None)
     return agent

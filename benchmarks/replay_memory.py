@@ -34,8 +34,14 @@ def main() -> None:
     for i in range(args.capacity):
         end = (i + 1) % episode == 0
         obs[0, -1, 0, 0] = i % 251
-        buf.add(obs, np.array([i % 18]), np.array([1.0]), np.array([end]), zero,
-                [obs[0]] if end else None)
+        buf.add(
+            obs,
+            np.array([i % 18]),
+            np.array([1.0]),
+            np.array([end]),
+            zero,
+            [obs[0]] if end else None,
+        )
     after = rss_bytes()
     # Final rows (one per episode) take slots too: count only real transitions held.
     held = int(((buf.flags[0] & 4) == 0).sum())

@@ -15,6 +15,7 @@ from farsighter.errors import FarsighterError
 USAGE = """usage: farsighter <command> [options]
 
 commands:
+  maze      the bridge-maze study (paper Fig. 1): farsighter maze [--quick] [--out DIR]
   train     train an agent:   farsighter train --algo farsighter --env CartPole-v1 [--help]
   eval      evaluate a run:   farsighter eval RUN_DIR [--episodes 10]
   plot      draw a run's learning curve:  farsighter plot RUN_DIR
@@ -123,7 +124,14 @@ def cmd_presets(argv: Sequence[str]) -> int:
     return 0
 
 
+def cmd_maze(argv: Sequence[str]) -> int:
+    from farsighter.studies.maze import main as maze_main
+
+    return maze_main(argv)
+
+
 COMMANDS: dict[str, Callable[[Sequence[str]], int]] = {
+    "maze": cmd_maze,
     "train": cmd_train,
     "eval": cmd_eval,
     "plot": cmd_plot,

@@ -49,9 +49,7 @@ class NatureCNN(nn.Module):
         return self.fc(self.conv(obs_BCHW.float() / 255.0))
 
 
-def make_torso(
-    obs_space: gym.spaces.Box, hidden_sizes: tuple[int, ...]
-) -> MLPTorso | NatureCNN:
+def make_torso(obs_space: gym.spaces.Box, hidden_sizes: tuple[int, ...]) -> MLPTorso | NatureCNN:
     """Images (C, H, W) get the Nature CNN; flat vectors get the MLP."""
     shape = obs_space.shape
     assert shape is not None

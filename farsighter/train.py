@@ -6,9 +6,10 @@ import json
 import pickle
 import time
 from collections import deque
+from collections.abc import Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Any
+from typing import Any, Protocol
 
 import gymnasium as gym
 import numpy as np
@@ -97,8 +98,18 @@ def _pickle_envs(envs: gym.vector.VectorEnv) -> bytes | None:
         return None
 
 
-def train(cfg: Config) -> dict[str, Any]:
-    """Train ``cfg.algo`` on ``cfg.env``; returns the run's summary (also in summary.json)."""
+class Callback(Protocol):
+    """Observes a run without changing it (studies use it to record what the loop does not)."""
+
+    def on_step(self, global_step: int, info: dict[str, Any], agent: Any) -> None: ...
+
+    def on_finish(self, run_dir: Path, agent: Any) -> None: ...
+
+
+def train(cfg: Config, callbacks: Sequence[Callback] = ()) -> dict[str, Any]:
+    """Train ``cfg.algo`` on ``cfg.env``; returns the run's summary (also in summary.json).
+
+    ``callbacks`` see every vector step's ``info`` and the agent, read-only by contract."""
     validate(cfg)
     device = resolve_device(cfg.device)
     # Make the environments before touching the run directory: a bad id changes nothing.
@@ -216,6 +227,8 @@ def train(cfg: Config) -> dict[str, Any]:
             if "td_loss" in metrics:
                 last_loss = metrics["td_loss"]
 
+            for callback in callbacks:
+                callback.on_step(state.global_step, info, agent)
             for ep_return, ep_length in _finished_episodes(info):
                 state.episodes += 1
                 state.recent_returns.append(ep_return)
@@ -263,6 +276,8 @@ def train(cfg: Config) -> dict[str, Any]:
             run_eval()  # always finish with an evaluation
         checkpoint_now()
         torch.save(agent.state_dict(include_replay=False), path / POLICY_FILE)
+        for callback in callbacks:
+            callback.on_finish(path, agent)
     finally:
         bar.close()
         logger.close()

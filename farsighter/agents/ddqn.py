@@ -72,6 +72,11 @@ class DDQNAgent:
         q_EA = self.q(obs_tensor(obs_E, self.device))
         return q_EA.argmax(dim=1).cpu().numpy()
 
+    @torch.no_grad()
+    def q_estimate(self, obs_B: np.ndarray) -> tuple[np.ndarray, np.ndarray | None]:
+        """Q(s, .) for a batch of states; DDQN has no posterior, so no variance."""
+        return self.q(obs_tensor(obs_B, self.device)).cpu().numpy(), None
+
     def observe(
         self,
         obs_E: np.ndarray,

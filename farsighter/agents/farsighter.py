@@ -138,6 +138,13 @@ class FarsighterAgent:
             self.redraw_E[:] = False
         return torch.einsum("ed,ead->ea", phi_ED, self.w_EAD)
 
+    @torch.no_grad()
+    def q_estimate(self, obs_B: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """Posterior mean of Q(s, .) and its predictive variance phi^T Cov_a phi (Eq. 7, 9)."""
+        phi_BD = self.torso(obs_tensor(obs_B, self.device))
+        mean_BA = phi_BD @ self.head.mean_AD.T
+        return mean_BA.cpu().numpy(), self.head.predictive_var(phi_BD).cpu().numpy()
+
     def observe(
         self,
         obs_E: np.ndarray,
