@@ -1,0 +1,780 @@
+"""The bridge-maze study (paper section 5.1, Figure 1b-g), a thin script over the library.
+
+Runs each agent of the study for several seeds in parallel worker processes, records per run the
+state visits and the Q-estimate at the start state over time (a read-only callback), and draws
+every figure from those saved files, so ``--plot-only`` redraws them. An interrupted study is
+resumed: finished runs (with ``summary.json``) are kept, unfinished ones are rerun.
+"""
+
+from __future__ import annotations
+
+import csv
+import json
+import os
+import shutil
+import time
+import warnings
+from collections.abc import Sequence
+from concurrent.futures import FIRST_COMPLETED, ProcessPoolExecutor, wait
+from dataclasses import asdict, dataclass, field
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from farsighter.config import Config, make_config
+from farsighter.errors import FarsighterError
+
+ENV_ID = "farsighter/BridgeMaze-v0"
+Q_STAR = 75.0  # optimal value of the start state (tested by value iteration)
+
+
+@dataclass(frozen=True)
+class Agent:
+    """One line of the study: a label, an algorithm and its overrides."""
+
+    label: str
+    algo: str
+    overrides: dict[str, Any] = field(default_factory=dict)
+
+
+# Shared settings of every agent (the paper keeps shared parts identical across methods).
+# gamma = 1 makes Q*(start) = 75 exactly (section 5.1); the rest is our tuning for a 159-cell maze.
+COMMON: dict[str, Any] = {
+    "gamma": 1.0,
+    "optimizer": "adam",
+    "lr": 0.001,
+    "optim_eps": 1e-8,
+    "hidden_sizes": (64, 64),
+    "batch_size": 64,
+    "train_every": 4,
+    "buffer_size": 50_000,
+    "learning_starts": 1_000,
+    "target_update_every": 500,
+    "eps_decay_steps": 10_000,
+    "eps_end": 0.05,
+    "loss": "huber",
+    "eval_every": 2_000,
+    "eval_episodes": 1,  # the maze is deterministic: one greedy episode says it all
+    "eval_max_steps": 200,
+    "checkpoint_every": 0,
+    "log_every": 1_000,
+    "blr.posterior_every": 1_000,
+    "blr.posterior_samples": 5_000,
+    # Q-values here are of order 100 (Atari's clipped rewards keep them near 1), so the BLR noise
+    # and prior are scaled up: with sigma_eps = sigma = 1 the posterior sd (~0.1) is negligible
+    # beside Q differences and Thompson sampling does not explore (measured; see the report).
+    "blr.prior_std": 10.0,
+    "blr.noise_std": 10.0,
+}
+
+AGENTS: tuple[Agent, ...] = (
+    Agent("DDQN", "ddqn"),
+    Agent("BDQN", "bdqn", {"blr.redraw": "episode"}),
+    Agent("Farsighter (k=10)", "farsighter", {"k": 10}),
+    Agent(
+        "Farsighter (adaptive k)",
+        "farsighter",
+        {
+            "k": 20,
+            "adaptive_k.enabled": True,
+            "adaptive_k.variance_target": 0.5,
+            "adaptive_k.k_min": 2,
+            "adaptive_k.k_max": 40,
+            "adaptive_k.empty_buffer": False,
+        },
+    ),
+)
+
+
+@dataclass(frozen=True)
+class StudyConfig:
+    """What a study runs; saved as study.json."""
+
+    seeds: tuple[int, ...] = (1, 2, 3, 4, 5)
+    steps: int = 40_000
+    probe_every: int = 500
+    workers: int = 0  # 0: one per core
+    agents: tuple[str, ...] = tuple(a.label for a in AGENTS)
+
+
+QUICK = StudyConfig(seeds=(1, 2), steps=20_000, probe_every=500)
+
+
+def slug(label: str) -> str:
+    return "".join(c if c.isalnum() else "-" for c in label.lower()).strip("-").replace("--", "-")
+
+
+def run_config(agent: Agent, seed: int, steps: int, run_dir: Path) -> Config:
+    values = {**COMMON, **agent.overrides}
+    return make_config(
+        agent.algo,
+        ENV_ID,
+        preset="control",
+        seed=seed,
+        total_steps=steps,
+        run_dir=str(run_dir),
+        progress=False,
+        torch_threads=1,
+        device="cpu",
+        overwrite=True,
+        **values,
+    )
+
+
+class MazeProbe:
+    """Read-only callback: state visits, and the Q-estimate at the start state over time."""
+
+    def __init__(self, probe_every: int, progress: Any = None, key: str = "") -> None:
+        import gymnasium as gym
+
+        import farsighter.envs.maze  # noqa: F401  (registers the ids)
+
+        env = gym.make(ENV_ID)
+        maze = env.unwrapped
+        self.start_obs = maze.obs_for(*maze.start)[None]  # type: ignore[attr-defined]
+        self.visits = np.zeros(maze.free_mask.shape, dtype=np.int64)  # type: ignore[attr-defined]
+        self.visits[maze.start] += 1  # type: ignore[attr-defined,index]
+        env.close()
+        self.probe_every = probe_every
+        self.rows: list[dict[str, float]] = []
+        self.progress, self.key = progress, key
+        self.next_probe = 0
+
+    def on_step(self, global_step: int, info: dict[str, Any], agent: Any) -> None:
+        for position in info["position"]:  # one (row, col) per vectorised environment
+            row, col = position
+            self.visits[row, col] += 1
+        if global_step >= self.next_probe:
+            self.next_probe += self.probe_every
+            q_A, var_A = agent.q_estimate(self.start_obs)
+            a = int(np.argmax(q_A[0]))
+            diag = agent.diagnostics()
+            self.rows.append(
+                {
+                    "global_step": global_step,
+                    "q_start": float(q_A[0, a]),
+                    "q_start_var": float(var_A[0, a]) if var_A is not None else float("nan"),
+                    "q_variance": float(diag.get("q_variance", float("nan"))),
+                    "k": float(diag.get("k", float("nan"))),
+                }
+            )
+            if self.progress is not None:
+                self.progress[self.key] = global_step
+
+    def on_finish(self, run_dir: Path, agent: Any) -> None:
+        np.save(run_dir / "visits.npy", self.visits)
+        with (run_dir / "probe.csv").open("w", newline="") as fh:
+            writer = csv.DictWriter(fh, fieldnames=list(self.rows[0]))
+            writer.writeheader()
+            writer.writerows(self.rows)
+        if self.progress is not None:
+            self.progress[self.key] = -1  # done
+
+
+def _run(label: str, seed: int, steps: int, probe_every: int, run_dir: str, progress: Any) -> str:
+    from farsighter.train import train
+
+    agent = next(a for a in AGENTS if a.label == label)
+    cfg = run_config(agent, seed, steps, Path(run_dir))
+    train(cfg, callbacks=[MazeProbe(probe_every, progress, f"{label}|{seed}")])
+    return run_dir
+
+
+def run_study(out: Path, study: StudyConfig, show_progress: bool = True) -> Path:
+    """Run (or resume) every agent x seed, then write figures, tables and the report."""
+    unknown = [a for a in study.agents if a not in {x.label for x in AGENTS}]
+    if unknown:
+        raise FarsighterError(
+            f"unknown maze agent(s) {unknown}; accepted: {', '.join(a.label for a in AGENTS)}"
+        )
+    out.mkdir(parents=True, exist_ok=True)
+    saved = out / "study.json"
+    if saved.exists():
+        previous = json.loads(saved.read_text())
+        current = json.loads(json.dumps(asdict(study)))
+        previous.pop("workers", None)
+        current.pop("workers", None)
+        if previous != current:
+            raise FarsighterError(
+                f"{out} holds a study with other settings ({saved}); use another --out or "
+                "--overwrite"
+            )
+    saved.write_text(json.dumps(asdict(study), indent=2) + "\n")
+
+    jobs = []
+    for label in study.agents:
+        for seed in study.seeds:
+            run_dir = out / "runs" / f"{slug(label)}__s{seed}"
+            if (run_dir / "summary.json").exists() and (run_dir / "probe.csv").exists():
+                continue  # finished before: keep it
+            if run_dir.exists():
+                shutil.rmtree(run_dir)  # interrupted: its callback state is gone, rerun it
+            jobs.append((label, seed, run_dir))
+    workers = study.workers or os.cpu_count() or 1
+    total = len(study.agents) * len(study.seeds) * study.steps
+    done_before = total - len(jobs) * study.steps
+    if jobs:
+        _execute(jobs, study, workers, total, done_before, show_progress)
+    write_outputs(out)
+    return out
+
+
+def _execute(
+    jobs: list[tuple[str, int, Path]],
+    study: StudyConfig,
+    workers: int,
+    total: int,
+    done_before: int,
+    show_progress: bool,
+) -> None:
+    import multiprocessing as mp
+
+    from tqdm import tqdm
+
+    ctx = mp.get_context("spawn")  # fresh interpreters: nothing shared by accident
+    with ctx.Manager() as manager:
+        progress = manager.dict()
+        bar = tqdm(
+            total=total,
+            initial=done_before,
+            unit="step",
+            disable=not show_progress,
+            desc=f"maze study ({len(jobs)} runs, {workers} workers)",
+            dynamic_ncols=True,
+        )
+        finished_steps = 0
+        with ProcessPoolExecutor(workers, mp_context=ctx) as pool:
+            pending = {
+                pool.submit(
+                    _run, label, seed, study.steps, study.probe_every, str(run_dir), progress
+                )
+                for label, seed, run_dir in jobs
+            }
+            while pending:
+                done, pending = wait(pending, timeout=1.0, return_when=FIRST_COMPLETED)
+                for fut in done:
+                    fut.result()  # re-raise a worker's error here
+                    finished_steps += study.steps
+                running = sum(v for v in progress.values() if v > 0)
+                bar.n = done_before + finished_steps + running
+                bar.refresh()
+        bar.n = total
+        bar.close()
+
+
+# ------------------------------------------------------------------------------------------------
+# Outputs: everything below reads only saved files.
+# ------------------------------------------------------------------------------------------------
+
+
+def _read_csv(file: Path) -> dict[str, np.ndarray]:
+    from farsighter.plots import read_csv
+
+    return read_csv(file)
+
+
+def load_runs(out: Path) -> dict[str, list[dict[str, Any]]]:
+    study = json.loads((out / "study.json").read_text())
+    runs: dict[str, list[dict[str, Any]]] = {}
+    for label in study["agents"]:
+        for seed in study["seeds"]:
+            run_dir = out / "runs" / f"{slug(label)}__s{seed}"
+            if not (run_dir / "probe.csv").exists():
+                continue
+            runs.setdefault(label, []).append(
+                {
+                    "seed": seed,
+                    "metrics": _read_csv(run_dir / "metrics.csv"),
+                    "eval": _read_csv(run_dir / "eval.csv"),
+                    "probe": _read_csv(run_dir / "probe.csv"),
+                    "visits": np.load(run_dir / "visits.npy"),
+                    "config": json.loads((run_dir / "config.json").read_text()),
+                }
+            )
+    if not runs:
+        raise FarsighterError(f"{out} holds no finished maze runs (runs/*/probe.csv)")
+    return runs
+
+
+def _binned_curve(steps: np.ndarray, values: np.ndarray, edges: np.ndarray) -> np.ndarray:
+    out = np.full(len(edges) - 1, np.nan)
+    for i in range(len(edges) - 1):
+        sel = (steps > edges[i]) & (steps <= edges[i + 1])
+        if sel.any():
+            out[i] = values[sel].mean()
+    # carry the last value forward through bins without a finished episode
+    for i in range(1, len(out)):
+        if np.isnan(out[i]):
+            out[i] = out[i - 1]
+    return out
+
+
+def summarise(runs: dict[str, list[dict[str, Any]]], max_steps: int) -> list[dict[str, Any]]:
+    """The table: bias and variance of the Q-estimate at the start state, success, exploration."""
+    rows = []
+    for label, items in runs.items():
+        q_final = np.array([r["probe"]["q_start"][-1] for r in items])
+        post_var = np.array([r["probe"]["q_start_var"][-1] for r in items])
+        success_rates, first_success, right_fraction = [], [], []
+        for r in items:
+            m = r["metrics"]
+            ret, steps = m.get("episodic_return", np.array([])), m.get("global_step", np.array([]))
+            ok = ret > -max_steps  # a failed episode is exactly max_steps steps of -1
+            last = steps > 0.75 * steps.max() if len(steps) else np.array([], bool)
+            success_rates.append(float(ok[last].mean()) if last.any() else 0.0)
+            first_success.append(float(steps[ok][0]) if ok.any() else float("nan"))
+            v = r["visits"]
+            right_fraction.append(float(v[:, v.shape[1] // 2 + 2 :].sum() / v.sum()))
+        final_eval = np.array([r["eval"]["eval_return_mean"][-1] for r in items])
+        var_curves = [r["probe"]["q_variance"] for r in items]
+        rows.append(
+            {
+                "agent": label,
+                "seeds": len(items),
+                "q_start_mean": float(q_final.mean()),
+                "bias": float(abs(q_final.mean() - Q_STAR)),
+                "q_start_var_across_seeds": float(q_final.var()),
+                "posterior_var_at_start": float(np.nanmean(post_var))
+                if np.isfinite(post_var).any()
+                else float("nan"),
+                "success_rate_last_quarter": float(np.mean(success_rates)),
+                "final_eval_return": float(final_eval.mean()),
+                "steps_to_first_success": float(np.nanmean(first_success))
+                if np.isfinite(first_success).any()
+                else float("nan"),
+                "seeds_with_success": int(np.isfinite(first_success).sum()),
+                "right_side_visit_fraction": float(np.mean(right_fraction)),
+                # the final greedy policy reaches the apple (a failure is exactly -max_steps)
+                "greedy_success_seeds": int((final_eval > -max_steps).sum()),
+                "variance_last_over_peak": _last_over_peak(var_curves),
+            }
+        )
+    return rows
+
+
+def _last_over_peak(curves: list[np.ndarray]) -> float:
+    """Mean over seeds of (final Q-variance / its peak): < 1 means the variance vanished."""
+    ratios = [c[-1] / np.nanmax(c) for c in curves if np.isfinite(c).any() and np.nanmax(c) > 0]
+    return float(np.mean(ratios)) if ratios else float("nan")
+
+
+def write_outputs(out: Path) -> None:
+    """Figures, table (CSV and Markdown) and report.md, from the saved run files only."""
+    runs = load_runs(out)
+    study = json.loads((out / "study.json").read_text())
+    rows = summarise(runs, max_steps=200)  # the maze's time limit
+    figures = out / "figures"
+    figures.mkdir(exist_ok=True)
+    _plot_learning_curves(runs, study["steps"], figures / "learning_curves.png")
+    _plot_q_estimate(runs, figures / "q_estimate.png")
+    _plot_heatmaps(runs, figures / "heatmaps.png")
+    _plot_variance(runs, figures / "posterior_variance.png")
+    _write_table(rows, out)
+    _write_report(rows, study, out)
+
+
+def _plt() -> Any:
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    return plt
+
+
+COLORS = {
+    "DDQN": "C0",
+    "BDQN": "C1",
+    "Farsighter (k=10)": "C2",
+    "Farsighter (adaptive k)": "C3",
+    "OB2I": "C4",
+}
+
+
+def _plot_learning_curves(runs: dict[str, list[dict[str, Any]]], steps: int, file: Path) -> None:
+    plt = _plt()
+    edges = np.linspace(0, steps, 41)
+    centers = (edges[:-1] + edges[1:]) / 2
+    fig, ax = plt.subplots(figsize=(7, 4.2))
+    for label, items in runs.items():
+        curves = np.array(
+            [
+                _binned_curve(r["metrics"]["global_step"], r["metrics"]["episodic_return"], edges)
+                for r in items
+                if len(r["metrics"])
+            ]
+        )
+        mean, std = np.nanmean(curves, axis=0), np.nanstd(curves, axis=0)
+        c = COLORS.get(label)
+        ax.plot(centers, mean, label=label, color=c)
+        ax.fill_between(centers, mean - std, mean + std, alpha=0.15, color=c)
+    ax.axhline(Q_STAR, ls="--", color="k", lw=1, label="optimal return (75)")
+    ax.set_xlabel("environment steps")
+    ax.set_ylabel("training episode return")
+    ax.set_title("Bridge maze: learning curves (mean ± std over seeds)")
+    ax.legend(fontsize=8, loc="lower right")
+    ax.grid(alpha=0.3)
+    fig.tight_layout()
+    fig.savefig(file, dpi=120)
+    plt.close(fig)
+
+
+def _plot_q_estimate(runs: dict[str, list[dict[str, Any]]], file: Path) -> None:
+    plt = _plt()
+    fig, (ax0, ax1) = plt.subplots(1, 2, figsize=(11, 4.2), gridspec_kw={"width_ratios": [1, 1.4]})
+    labels = list(runs)
+    for i, label in enumerate(labels):
+        q = np.array([r["probe"]["q_start"][-1] for r in runs[label]])
+        c = COLORS.get(label)
+        ax0.scatter(
+            np.full(len(q), i) + np.linspace(-0.12, 0.12, len(q)), q, color=c, s=18, alpha=0.7
+        )
+        ax0.errorbar(i, q.mean(), yerr=q.std(), fmt="o", color="k", capsize=6, ms=7)
+        post = np.array([r["probe"]["q_start_var"][-1] for r in runs[label]])
+        if np.isfinite(post).all():
+            ax0.errorbar(
+                i + 0.28, q.mean(), yerr=np.sqrt(post.mean()), fmt="s", color=c, capsize=4, ms=5
+            )
+        steps = runs[label][0]["probe"]["global_step"]
+        curves = np.array([r["probe"]["q_start"][: len(steps)] for r in runs[label]])
+        ax1.plot(steps, curves.mean(0), color=c, label=label)
+        ax1.fill_between(
+            steps,
+            curves.mean(0) - curves.std(0),
+            curves.mean(0) + curves.std(0),
+            color=c,
+            alpha=0.15,
+        )
+    for ax in (ax0, ax1):
+        ax.axhline(Q_STAR, ls="--", color="k", lw=1)
+        ax.grid(alpha=0.3)
+    ax0.set_xticks(range(len(labels)))
+    ax0.set_xticklabels([lbl.replace(" (", "\n(") for lbl in labels], fontsize=8)
+    ax0.set_ylabel("Q-estimate at the start state")
+    ax0.set_title(
+        "Final estimate: seeds (dots), mean ± std (black),\nposterior sd (square)", fontsize=9
+    )
+    ax1.set_xlabel("environment steps")
+    ax1.set_title("Q-estimate at the start over training (Q* = 75 dashed)", fontsize=9)
+    ax1.legend(fontsize=8)
+    fig.tight_layout()
+    fig.savefig(file, dpi=120)
+    plt.close(fig)
+
+
+def _plot_heatmaps(runs: dict[str, list[dict[str, Any]]], file: Path) -> None:
+    import gymnasium as gym
+
+    import farsighter.envs.maze  # noqa: F401
+
+    plt = _plt()
+    maze = gym.make(ENV_ID).unwrapped
+    wall = maze.wall_mask  # type: ignore[attr-defined]
+    labels = list(runs)
+    fig, axes = plt.subplots(1, len(labels), figsize=(3.6 * len(labels), 3.6))
+    axes = np.atleast_1d(axes)
+    for ax, label in zip(axes, labels, strict=True):
+        visits = np.sum([r["visits"] for r in runs[label]], axis=0).astype(float)
+        shown = np.ma.masked_array(np.log10(visits + 1), mask=wall)
+        cmap = plt.get_cmap("viridis").copy()
+        cmap.set_bad("black")
+        im = ax.imshow(shown, cmap=cmap, origin="upper")
+        for r, c in maze.bridge_cells:  # type: ignore[attr-defined]
+            ax.add_patch(plt.Rectangle((c - 0.5, r - 0.5), 1, 1, fill=False, ec="white", lw=1.5))
+        sr, sc = maze.start  # type: ignore[attr-defined]
+        gr, gc = maze.goal  # type: ignore[attr-defined]
+        ax.text(sc, sr, "S", ha="center", va="center", color="white", fontsize=9, weight="bold")
+        ax.text(gc, gr, "G", ha="center", va="center", color="red", fontsize=9, weight="bold")
+        ax.set_title(label, fontsize=9)
+        ax.set_xticks([])
+        ax.set_yticks([])
+        fig.colorbar(im, ax=ax, fraction=0.046, pad=0.03, label="log10(visits + 1)")
+    fig.suptitle("State visits during training (all seeds); wall black, bridge outlined")
+    fig.tight_layout()
+    fig.savefig(file, dpi=120)
+    plt.close(fig)
+
+
+def _plot_variance(runs: dict[str, list[dict[str, Any]]], file: Path) -> None:
+    plt = _plt()
+    fig, ax = plt.subplots(figsize=(7, 4.2))
+    drawn = False
+    for label, items in runs.items():
+        steps = items[0]["probe"]["global_step"]
+        curves = np.array([r["probe"]["q_variance"][: len(steps)] for r in items])
+        if not np.isfinite(curves).any():
+            continue  # DDQN has no posterior
+        drawn = True
+        with warnings.catch_warnings():  # steps before the first refresh are NaN for all seeds
+            warnings.simplefilter("ignore", RuntimeWarning)
+            mean = np.nanmean(curves, axis=0)
+        ax.plot(steps, mean, color=COLORS.get(label), label=label)
+    ax.set_yscale("log")
+    ax.set_xlabel("environment steps")
+    ax.set_ylabel("Q-variance, phi^T Cov phi (greedy a)")
+    ax.set_title("Posterior variance over training (mean over seeds)")
+    if drawn:
+        ax.legend(fontsize=8)
+    ax.grid(alpha=0.3)
+    fig.tight_layout()
+    fig.savefig(file, dpi=120)
+    plt.close(fig)
+
+
+TABLE_COLUMNS = (
+    "agent",
+    "seeds",
+    "q_start_mean",
+    "bias",
+    "q_start_var_across_seeds",
+    "posterior_var_at_start",
+    "success_rate_last_quarter",
+    "final_eval_return",
+    "steps_to_first_success",
+    "seeds_with_success",
+    "right_side_visit_fraction",
+    "greedy_success_seeds",
+    "variance_last_over_peak",
+)
+
+
+def _write_table(rows: list[dict[str, Any]], out: Path) -> None:
+    with (out / "table.csv").open("w", newline="") as fh:
+        writer = csv.DictWriter(fh, fieldnames=list(TABLE_COLUMNS))
+        writer.writeheader()
+        writer.writerows(rows)
+    (out / "table.md").write_text(_markdown_table(rows))
+
+
+def _fmt(v: Any) -> str:
+    if isinstance(v, float):
+        return "n/a" if not np.isfinite(v) else f"{v:.3g}" if abs(v) < 1000 else f"{v:.0f}"
+    return str(v)
+
+
+def _markdown_table(rows: list[dict[str, Any]]) -> str:
+    head = [
+        "agent",
+        "Q(start) mean",
+        "bias vs 75",
+        "var across seeds",
+        "posterior var",
+        "success (last 25%)",
+        "final eval return",
+        "greedy solves (seeds)",
+        "steps to 1st success",
+        "right-side visits",
+    ]
+    keys = [
+        "agent",
+        "q_start_mean",
+        "bias",
+        "q_start_var_across_seeds",
+        "posterior_var_at_start",
+        "success_rate_last_quarter",
+        "final_eval_return",
+        "greedy_solves",
+        "steps_to_first_success",
+        "right_side_visit_fraction",
+    ]
+    lines = ["| " + " | ".join(head) + " |", "|" + "---|" * len(head)]
+    for r in rows:
+        r = {**r, "greedy_solves": f"{r['greedy_success_seeds']}/{r['seeds']}"}
+        lines.append("| " + " | ".join(_fmt(r[k]) for k in keys) + " |")
+    return "\n".join(lines) + "\n"
+
+
+def _claims(rows: list[dict[str, Any]]) -> list[tuple[str, str, bool | None]]:
+    by = {r["agent"]: r for r in rows}
+    fars = [r for k, r in by.items() if k.startswith("Farsighter")]
+    claims: list[tuple[str, str, bool | None]] = []
+    if "BDQN" in by and fars:
+        best = min(fars, key=lambda r: r["bias"])
+        claims.append(
+            (
+                "Farsighter's Q-estimate at the start state is less biased than BDQN's "
+                "(paper: BDQN ~62 vs Q* = 75, Farsighter the least biased).",
+                f"bias: BDQN {by['BDQN']['bias']:.3g}, {best['agent']} {best['bias']:.3g}",
+                best["bias"] < by["BDQN"]["bias"],
+            )
+        )
+        claims.append(
+            (
+                "Farsighter visits the right side of the bridge more than BDQN (Fig. 1d vs 1f).",
+                f"right-side visit fraction: BDQN {by['BDQN']['right_side_visit_fraction']:.3g}, "
+                + ", ".join(f"{r['agent']} {r['right_side_visit_fraction']:.3g}" for r in fars),
+                max(r["right_side_visit_fraction"] for r in fars)
+                > by["BDQN"]["right_side_visit_fraction"],
+            )
+        )
+        claims.append(
+            (
+                "Farsighter reaches the apple more reliably than BDQN (Fig. 1b).",
+                f"success in the last quarter: BDQN {by['BDQN']['success_rate_last_quarter']:.3g}, "
+                + ", ".join(f"{r['agent']} {r['success_rate_last_quarter']:.3g}" for r in fars),
+                max(r["success_rate_last_quarter"] for r in fars)
+                > by["BDQN"]["success_rate_last_quarter"],
+            )
+        )
+    if "BDQN" in by and fars:
+        claims.append(
+            (
+                "BDQN's posterior variance vanishes over training while Farsighter keeps its "
+                "uncertainty (Fig. 1g).",
+                f"final / peak Q-variance: BDQN {by['BDQN']['variance_last_over_peak']:.3g}, "
+                + ", ".join(f"{r['agent']} {r['variance_last_over_peak']:.3g}" for r in fars),
+                by["BDQN"]["variance_last_over_peak"]
+                < min(r["variance_last_over_peak"] for r in fars),
+            )
+        )
+    if "DDQN" in by and fars:
+        best_far = max(fars, key=lambda r: r["greedy_success_seeds"])
+        claims.append(
+            (
+                "On this distant-reward task epsilon-greedy DDQN fails within the budget while "
+                "Farsighter succeeds in most seeds (greedy policy at the end reaches the apple).",
+                f"DDQN {by['DDQN']['greedy_success_seeds']}/{by['DDQN']['seeds']} seeds, "
+                f"{best_far['agent']} {best_far['greedy_success_seeds']}/{best_far['seeds']}",
+                by["DDQN"]["greedy_success_seeds"] <= by["DDQN"]["seeds"] // 2
+                and best_far["greedy_success_seeds"] > best_far["seeds"] // 2,
+            )
+        )
+        claims.append(
+            (
+                "Farsighter outperforms epsilon-greedy DDQN (section 5.2).",
+                f"final greedy return: DDQN {by['DDQN']['final_eval_return']:.3g}, "
+                + ", ".join(f"{r['agent']} {r['final_eval_return']:.3g}" for r in fars),
+                max(r["final_eval_return"] for r in fars) > by["DDQN"]["final_eval_return"],
+            )
+        )
+    if "OB2I" in by and fars:
+        claims.append(
+            (
+                "OB2I's Q-estimate variance is the largest (Fig. 1c).",
+                f"posterior/ensemble variance: OB2I {by['OB2I']['posterior_var_at_start']:.3g}",
+                None,
+            )
+        )
+    else:
+        claims.append(
+            (
+                "OB2I is less biased than BDQN but with the largest variance (Fig. 1c).",
+                "OB2I is not part of this study yet",
+                None,
+            )
+        )
+    return claims
+
+
+def _write_report(rows: list[dict[str, Any]], study: dict[str, Any], out: Path) -> None:
+    verdict = {
+        True: "holds in this run",
+        False: "does NOT hold in this run",
+        None: "not tested here",
+    }
+    lines = [
+        "# Bridge maze study (paper section 5.1, Figure 1)",
+        "",
+        f"Agents: {', '.join(study['agents'])}; seeds {list(study['seeds'])}; "
+        f"{study['steps']:,} environment steps each. Environment `{ENV_ID}`: 15x13 grid, a "
+        "3-column wall crossed by a one-cell-high bridge, start bottom-left, apple top-right, "
+        "reward +100 at the apple and -1 per other step, gamma = 1, 200-step time limit; the "
+        "optimal value of the start state is exactly 75 (value iteration).",
+        "",
+        "## Table",
+        "",
+        "Q(start) is the greedy value at the start state under the final Q (posterior mean for "
+        "BDQN/Farsighter); *posterior var* is phi^T Cov phi there. Success: training episodes "
+        "that reached the apple in the last quarter of training.",
+        "",
+        _markdown_table(rows),
+        "## The paper's claims, checked",
+        "",
+    ]
+    for claim, evidence, ok in _claims(rows):
+        lines.append(f"- **{claim}** {evidence}: {verdict[ok]}.")
+    lines += [
+        "",
+        "## Figures",
+        "",
+        "Learning curves (Fig. 1b):",
+        "",
+        "![learning curves](figures/learning_curves.png)",
+        "",
+        "Q-estimate at the start state against Q* = 75 (Fig. 1c):",
+        "",
+        "![Q estimate](figures/q_estimate.png)",
+        "",
+        "State-visit heatmaps (Fig. 1d-f):",
+        "",
+        "![heatmaps](figures/heatmaps.png)",
+        "",
+        "Posterior variance over time (Fig. 1g):",
+        "",
+        "![posterior variance](figures/posterior_variance.png)",
+        "",
+        f"Redraw the figures from the saved runs with `farsighter maze --plot-only {out}`.",
+        "",
+    ]
+    (out / "report.md").write_text("\n".join(lines))
+
+
+def main(argv: Sequence[str]) -> int:
+    import argparse
+
+    parser = argparse.ArgumentParser(
+        prog="farsighter maze", description="The bridge-maze study of section 5.1."
+    )
+    parser.add_argument(
+        "--quick",
+        action="store_true",
+        help=f"{len(QUICK.seeds)} seeds x {QUICK.steps:,} steps (about 2 minutes)",
+    )
+    parser.add_argument(
+        "--out", default=None, help="study directory (default studies/maze[-quick])"
+    )
+    parser.add_argument("--seeds", type=int, nargs="+", default=None)
+    parser.add_argument("--steps", type=int, default=None)
+    parser.add_argument("--workers", type=int, default=0, help="worker processes (0: one per core)")
+    parser.add_argument(
+        "--agents",
+        nargs="+",
+        default=None,
+        help=f"subset of: {', '.join(repr(a.label) for a in AGENTS)}",
+    )
+    parser.add_argument(
+        "--plot-only",
+        metavar="DIR",
+        default=None,
+        help="redraw figures, table and report of an existing study",
+    )
+    parser.add_argument("--overwrite", action="store_true", help="delete --out first")
+    parser.add_argument("--no-progress", action="store_true")
+    args = parser.parse_args(list(argv))
+    if args.plot_only:
+        path = Path(args.plot_only)
+        if not (path / "study.json").exists():
+            raise FarsighterError(f"{path} holds no maze study (no study.json)")
+        write_outputs(path)
+        print(f"report: {path / 'report.md'}")
+        return 0
+    base = QUICK if args.quick else StudyConfig()
+    study = StudyConfig(
+        seeds=tuple(args.seeds) if args.seeds else base.seeds,
+        steps=args.steps or base.steps,
+        probe_every=base.probe_every,
+        workers=args.workers,
+        agents=tuple(args.agents) if args.agents else base.agents,
+    )
+    if study.steps < 2 * study.probe_every:
+        raise FarsighterError(f"--steps must be >= {2 * study.probe_every} (got {study.steps})")
+    out = Path(args.out or ("studies/maze-quick" if args.quick else "studies/maze"))
+    if args.overwrite and out.exists():
+        shutil.rmtree(out)
+    t0 = time.perf_counter()
+    run_study(out, study, show_progress=not args.no_progress)
+    print(f"maze study done in {time.perf_counter() - t0:.0f} s")
+    print(f"report: {out / 'report.md'}")
+    print(f"figures: {out / 'figures'}")
+    return 0
