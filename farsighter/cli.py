@@ -16,6 +16,8 @@ USAGE = """usage: farsighter <command> [options]
 
 commands:
   maze      the bridge-maze study (paper Fig. 1): farsighter maze [--quick] [--out DIR]
+  robotics  the continuous-control study (Fig. 3, Table 3):
+            farsighter robotics --env Walker2d-v5 --steps 30000 --seeds 1 2 3 [--quick]
   train     train an agent:   farsighter train --algo farsighter --env CartPole-v1 [--help]
   eval      evaluate a run:   farsighter eval RUN_DIR [--episodes 10]
   plot      draw a run's learning curve:  farsighter plot RUN_DIR
@@ -74,7 +76,7 @@ def cmd_train(argv: Sequence[str]) -> int:
 def cmd_eval(argv: Sequence[str]) -> int:
     import numpy as np
 
-    from farsighter.train import evaluate, load_agent
+    from farsighter.train import evaluate_episodes, load_agent
 
     parser = argparse.ArgumentParser(prog="farsighter eval", description="Evaluate a trained run.")
     parser.add_argument("run_dir")
@@ -86,20 +88,19 @@ def cmd_eval(argv: Sequence[str]) -> int:
         raise FarsighterError(f"--episodes must be >= 1 (got {args.episodes})")
     policy = load_agent(args.run_dir, device=args.device)
     env = policy.make_env(seed=args.seed)
-    returns = evaluate(policy.agent, policy.config, env, args.episodes, args.seed, 0)
+    result = evaluate_episodes(policy.agent, policy.config, env, args.episodes, args.seed, 0)
     env.close()
-    print(
-        json.dumps(
-            {
-                "run_dir": args.run_dir,
-                "episodes": args.episodes,
-                "mean_return": float(np.mean(returns)),
-                "std_return": float(np.std(returns)),
-                "returns": returns,
-            },
-            indent=2,
-        )
-    )
+    returns = result.returns
+    report = {
+        "run_dir": args.run_dir,
+        "episodes": args.episodes,
+        "mean_return": float(np.mean(returns)),
+        "std_return": float(np.std(returns)),
+        "returns": returns,
+    }
+    if result.successes:  # goal-conditioned tasks report info["is_success"]
+        report["success_rate"] = float(np.mean(result.successes))
+    print(json.dumps(report, indent=2))
     return 0
 
 
@@ -130,8 +131,15 @@ def cmd_maze(argv: Sequence[str]) -> int:
     return maze_main(argv)
 
 
+def cmd_robotics(argv: Sequence[str]) -> int:
+    from farsighter.studies.robotics import main as robotics_main
+
+    return robotics_main(argv)
+
+
 COMMANDS: dict[str, Callable[[Sequence[str]], int]] = {
     "maze": cmd_maze,
+    "robotics": cmd_robotics,
     "train": cmd_train,
     "eval": cmd_eval,
     "plot": cmd_plot,

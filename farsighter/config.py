@@ -20,18 +20,22 @@ from typing import Any, Literal
 
 from farsighter.errors import ConfigError
 
-ALGORITHMS: tuple[str, ...] = ("ddqn", "kddqn", "bdqn", "farsighter")
-"""Algorithms this version can train (SPEC section 2 lists the full family)."""
-
-PLANNED_ALGORITHMS: tuple[str, ...] = (
-    "ob2i",
-    "rnd",
-    "krnd",
+ALGORITHMS: tuple[str, ...] = (
+    "ddqn",
+    "kddqn",
+    "bdqn",
+    "farsighter",
     "naf",
     "knaf",
     "bnaf",
     "farsighter-naf",
+    "ob2i",
+    "rnd",
+    "krnd",
 )
+"""Algorithms this version can train (SPEC section 2 lists the full family)."""
+
+PLANNED_ALGORITHMS: tuple[str, ...] = ()
 """Algorithms of the paper that are specified but not yet implemented in this version."""
 
 
@@ -98,11 +102,117 @@ class AtariConfig:
 
 
 @dataclass(frozen=True)
+class NAFConfig:
+    """Continuous agents naf, knaf, bnaf, farsighter-naf (paper sections 3.3, 4.3; Algorithm 3).
+
+    The TD update of theta, theta_V, theta_P uses the top-level optimizer, lr, batch_size,
+    train_every, loss and gamma; the fields below are what NAF adds.
+    """
+
+    hidden_sizes: tuple[int, ...] = (64, 32)
+    """Representation MLP phi(s). Appendix 9.1.2: two layers of 64 and 32 units."""
+    tau: float = 0.005
+    """Soft target update theta' <- tau theta + (1 - tau) theta' after every TD update
+    (Algorithm 3 line 11). Gu et al. (2016) use 0.001; 0.005 is TD3's / SB3's default."""
+    updates_per_step: int = 1
+    """TD updates per ``train_every`` environment steps (the I iterations of Algorithm 3 line 7)."""
+    noise: Literal["gaussian", "ou"] = "gaussian"
+    """Action noise of naf/knaf: Gaussian (TD3-style) or Ornstein-Uhlenbeck (DDPG, used by Gu et
+    al. 2016). The Bayesian agents explore by sampling mu-layer weights instead."""
+    noise_std: float = 0.1
+    """Noise scale as a fraction of the half action range. TD3 uses 0.1; DDPG's OU sigma is 0.2."""
+    ou_theta: float = 0.15
+    """Mean reversion of the OU process x += -theta x + sigma N(0, 1) (Lillicrap et al. 2016)."""
+    mu_penalty: float = 0.0
+    """L2 penalty on the mu-layer's pre-tanh output (mean weights), added to naf/knaf's TD loss
+    and to the Bayesian agents' ELBO (0: off). Deep in tanh's saturation mu gets no gradient and
+    weight draws no longer move the action; SAC's code regularises its pre-tanh mean with 1e-3
+    (Haarnoja et al. 2018). It did not rescue farsighter-naf on Pendulum (our runs)."""
+    prior_std: float = 0.1
+    """Prior N(0, prior_std^2) on every mu-layer weight; Table 1's prior sigma = 0.1."""
+    init_sigma: float = 0.002
+    """Initial posterior std of every mu-layer weight. Our choice: the pre-tanh action spread
+    is |phi| sigma, and |phi| grows to ~80 with the value scale on Pendulum (spread ~0.16)."""
+    noise_std_eps: float = 1.0
+    """sigma_eps of the Gaussian likelihood of the TD targets in the ELBO (Table 1: 1)."""
+    elbo_every: int = 10_000
+    """M: environment steps between ELBO updates of the mu-layer (Table 1: M = 10 N, N = 1k for
+    robotic control)."""
+    elbo_steps: int = 100
+    """Gradient steps of one ELBO update (the paper does not say; our choice)."""
+    elbo_batch: int = 1_000
+    """Minibatch of one ELBO step; Table 1: posterior update mini-batch 1k tuples (robotic)."""
+    elbo_lr: float = 0.001
+    """Adam learning rate of the mu-layer's means in the ELBO update."""
+    elbo_rho_lr: float = 0.01
+    """Adam learning rate of the mu-layer's rho (sigma = softplus(rho)): sigma moves slowly
+    with the means' rate (a note of bayes_layer's author)."""
+    kl_weight: float = 0.01
+    """Weight of KL(q || prior) / |replay| in the ELBO (1: the true ELBO of Eq. 10). Our choice
+    (a tempered posterior): at 1 the KL's pull of the means to 0 (w / prior_std^2 / |replay|)
+    erased mu's state dependence and its pull of sigma to prior_std flooded the actions with
+    noise, and NAF's P collapsed to 0 on Pendulum with k >= 2 (our runs)."""
+    her: bool = False
+    """Hindsight experience replay, future strategy (Andrychowicz et al. 2017), for
+    goal-conditioned (dict-observation) tasks; relabels goals when sampling."""
+    her_ratio: float = 0.8
+    """Fraction of relabelled samples; 0.8 is the paper's future_k = 4 (1 - 1 / (1 + 4))."""
+
+
+@dataclass(frozen=True)
+class OB2IConfig:
+    """OB2I (Bai et al. 2021): bootstrapped Q-heads, UCB-bonus, episodic backward update.
+
+    Defaults are the authors' code (Baichenjia/OB2I, ``run_atari.py --ebu --reward-type ucb``) as
+    recorded in SPEC section 2.3; the epsilon schedule 1.0 -> 0.1 is ALGO_DEFAULTS["ob2i"].
+    """
+
+    num_heads: int = 10
+    """K: linear Q-heads on the shared torso, all trained on every sample (code: --num-ensemble 10)."""
+    beta: float = 0.5
+    """Diffusion factor of the episodic backward update (EBU, Lee et al. 2019; code: --beta 0.5)."""
+    bonus_reward_weight: float = 5e-5
+    """alpha_1: weight of the immediate UCB-bonus, the std over online heads of Q_k(s, a)
+    (code: --rew-immed-ratio-ebu 5e-5)."""
+    bonus_next_weight: float = 5e-5
+    """alpha_2: weight of the next-state UCB-bonus, the std over target heads at (s', a'_k)
+    (code: --rew-nextq-ratio-ebu 5e-5)."""
+    normalize_next_bonus: bool = True
+    """Divide the next-state bonus by a running std of its values (code: --normnxq-ebu True)."""
+    normalize_reward_bonus: bool = False
+    """Same for the immediate bonus (code: --normrew-ebu False; the code's EBU path normalises it
+    anyway through a tuple-truthiness slip, so True reproduces what it ran)."""
+    eval_policy: Literal["vote", "mean"] = "vote"
+    """Greedy (evaluation) action: majority vote of the heads (the authors' evaluation), ties
+    broken by the mean Q; or the argmax of the heads' mean Q."""
+
+
+@dataclass(frozen=True)
+class RNDConfig:
+    """Random network distillation (Burda et al. 2018) on DDQN: rnd (1-step) and krnd (k-step),
+    the RND and TD(K)+RND baselines of the paper's appendix 9.1.1."""
+
+    intrinsic_weight: float = 0.5
+    """Weight of the normalised intrinsic reward added to the extrinsic reward (RND paper:
+    intrinsic and extrinsic advantage coefficients 1 and 2, i.e. 0.5 relative)."""
+    feature_dim: int = 512
+    """Output size of the fixed random target network and of the predictor (RND paper: 512)."""
+    lr: float = 1e-4
+    """Adam learning rate of the predictor (RND paper: 1e-4)."""
+    normalize_obs: bool = True
+    """Whiten flat observations with a running mean/std before both RND networks (RND paper
+    section 2.4); image observations are scaled to [0, 1] instead."""
+    obs_clip: float = 5.0
+    """Whitened observations are clipped to [-obs_clip, obs_clip] (RND paper: 5)."""
+
+
+@dataclass(frozen=True)
 class Config:
     """One training run: everything needed to reproduce it."""
 
     algo: str = "ddqn"
-    """Algorithm: one of ddqn, kddqn, bdqn, farsighter."""
+    """Algorithm: one of ddqn, kddqn, bdqn, farsighter, naf, knaf, bnaf, farsighter-naf, ob2i,
+    rnd, krnd."""
     env: str = "CartPole-v1"
     """Any Gymnasium id, passed to gymnasium.make unchanged (``module:EnvId`` works)."""
     seed: int = 1
@@ -112,7 +222,8 @@ class Config:
     run_dir: str = ""
     """Run directory; empty means runs/<env>__<algo>__s<seed>."""
     preset: str = "auto"
-    """Preset the defaults came from (auto: atari for Atari ids, control otherwise)."""
+    """Preset the defaults came from (auto: atari for Atari ids, continuous for the NAF agents,
+    control otherwise)."""
     device: str = "auto"
     """auto (CUDA when present, else CPU), cpu, cuda or cuda:N."""
     resume: bool = False
@@ -192,6 +303,12 @@ class Config:
     """Adaptive k (farsighter)."""
     atari: AtariConfig = field(default_factory=AtariConfig)
     """Atari preprocessing (applied automatically to ALE ids)."""
+    ob2i: OB2IConfig = field(default_factory=OB2IConfig)
+    """OB2I heads, bonus and backward update (ob2i)."""
+    rnd: RNDConfig = field(default_factory=RNDConfig)
+    """Random network distillation bonus (rnd, krnd)."""
+    naf: NAFConfig = field(default_factory=NAFConfig)
+    """Continuous-action agents (naf, knaf, bnaf, farsighter-naf)."""
 
     @property
     def effective_recent_window(self) -> int:
@@ -317,6 +434,39 @@ PRESETS: dict[str, Preset] = {
                 "loss": "huber",
             },
         ),
+        Preset(
+            "continuous",
+            "Continuous control (naf, knaf, bnaf, farsighter-naf; the auto preset for them): "
+            "Table 1's robotic column where it applies, NAF's usual optimiser for the rest.",
+            "Farsighter paper Table 1 (gamma, buffer, N = 1k, posterior minibatch 1k, "
+            "sigma_eps, prior sigma); Adam at 1e-3 as DDPG's critic (Lillicrap et al. 2016); "
+            "batch 128, one update per step, no gradient clipping, ELBO cadence: our tuning on "
+            "Pendulum-v1 (benchmarks/learning_pendulum.py)",
+            {
+                "optimizer": "adam",
+                "lr": 0.001,
+                "optim_eps": 1e-8,
+                "gamma": 0.99,
+                "batch_size": 128,
+                "train_every": 1,
+                "buffer_size": 1_000_000,
+                "learning_starts": 1_000,
+                "loss": "mse",  # Algorithm 3 line 9
+                # Clipping the squared-error gradient at norm 10 stalled NAF on Pendulum (our runs).
+                "max_grad_norm": 0.0,
+                "target_update_every": 1_000,  # N (only the recent window uses it for NAF)
+                "naf.tau": 0.005,
+                "naf.updates_per_step": 1,
+                "naf.elbo_every": 1,
+                "naf.elbo_steps": 1,
+                "naf.elbo_batch": 128,
+                "naf.prior_std": 0.1,
+                "naf.noise_std_eps": 1.0,
+                "eval_every": 5_000,
+                "eval_episodes": 5,
+                "eval_max_steps": 1_000,
+            },
+        ),
     )
 }
 
@@ -330,7 +480,26 @@ ALGO_DEFAULTS: dict[str, dict[str, Any]] = {
     # Farsighter: fresh draw every step (Algorithm 2), k-step returns, minibatches from the latest
     # N transitions (Algorithm 1 line 4). k = 10 is the smallest k of Figure 4.
     "farsighter": {"k": 10, "blr.redraw": "step", "sample_recent": True},
+    # OB2I: epsilon annealed 1.0 -> 0.1 around the head drawn per episode (authors' code:
+    # --exploration-final-eps 0.1, SPEC 2.3). A preset that sets eps_end takes precedence.
+    "ob2i": {"eps_end": 0.1},
+    # RND on DDQN, 1-step; k-step RND (TD(K)+RND of appendix 9.1.1) with k = 3 as for kddqn.
+    "rnd": {},
+    "krnd": {"k": 3},
+    # NAF (section 3.3): Gaussian action noise, 1-step. The continuous agents' TD loss is the
+    # squared error of Gu et al. (2016) / Algorithm 3 line 9.
+    "naf": {"k": 1, "loss": "mse"},
+    # Multi-step NAF (section 5.2 baselines): k-step returns; k = 5 as D4PG's n-step returns
+    # (Barth-Maron et al. 2018), the paper gives no k for continuous control.
+    "knaf": {"k": 5, "loss": "mse"},
+    # Bayesian NAF (section 4.3, Algorithm 3): mu-layer weights sampled per step, 1-step.
+    "bnaf": {"k": 1, "loss": "mse"},
+    # Farsighter-NAF (sections 4.3-4.4): weights re-drawn every step over k steps; same k as knaf.
+    "farsighter-naf": {"k": 5, "loss": "mse"},
 }
+
+NAF_ALGORITHMS: tuple[str, ...] = ("naf", "knaf", "bnaf", "farsighter-naf")
+"""The continuous-action agents (Box actions)."""
 
 
 def _nested_replace(obj: Any, dotted: dict[str, Any]) -> Any:
@@ -357,9 +526,12 @@ def is_atari_id(env_id: str) -> bool:
     return name.startswith("ALE/") or "NoFrameskip" in name
 
 
-def resolve_preset_name(preset: str, env: str) -> str:
+def resolve_preset_name(preset: str, env: str, algo: str = "") -> str:
+    """auto: atari for ALE ids, continuous for the NAF agents, control otherwise."""
     if preset == "auto":
-        return "atari" if is_atari_id(env) else "control"
+        if is_atari_id(env):
+            return "atari"
+        return "continuous" if algo in NAF_ALGORITHMS else "control"
     if preset not in PRESETS:
         raise ConfigError(f"unknown preset '{preset}'; accepted: auto, {', '.join(PRESETS)}")
     return preset
@@ -375,7 +547,7 @@ def make_config(
     """
     if algo not in ALGORITHMS:
         raise ConfigError(unknown_algo_message(algo))
-    name = resolve_preset_name(preset, env)
+    name = resolve_preset_name(preset, env, algo)
     values: dict[str, Any] = {}
     values.update(ALGO_DEFAULTS[algo])
     values.update(PRESETS[name].values)
@@ -453,8 +625,62 @@ def validate(cfg: Config) -> None:
     for ok, message in checks:
         if not ok:
             raise ConfigError(message)
-    if cfg.adaptive_k.enabled and cfg.algo != "farsighter":
-        raise ConfigError("adaptive_k.enabled is only supported by --algo farsighter")
+    ob, rn = cfg.ob2i, cfg.rnd
+    ob2i_rnd_checks: list[tuple[bool, str]] = [
+        (ob.num_heads >= 2, f"ob2i.num_heads must be >= 2 (got {ob.num_heads})"),
+        (0.0 <= ob.beta <= 1.0, f"ob2i.beta must be in [0, 1] (got {ob.beta})"),
+        (ob.bonus_reward_weight >= 0, "ob2i.bonus_reward_weight must be >= 0"),
+        (ob.bonus_next_weight >= 0, "ob2i.bonus_next_weight must be >= 0"),
+        (ob.eval_policy in ("vote", "mean"), "ob2i.eval_policy must be 'vote' or 'mean'"),
+        (
+            rn.intrinsic_weight >= 0,
+            f"rnd.intrinsic_weight must be >= 0 (got {rn.intrinsic_weight})",
+        ),
+        (rn.feature_dim >= 1, f"rnd.feature_dim must be >= 1 (got {rn.feature_dim})"),
+        (rn.lr > 0, f"rnd.lr must be > 0 (got {rn.lr})"),
+        (rn.obs_clip > 0, f"rnd.obs_clip must be > 0 (got {rn.obs_clip})"),
+        (
+            cfg.algo != "ob2i" or (cfg.k == 1 and not cfg.stride and not cfg.sample_recent),
+            "ob2i learns from whole episodes (episodic backward update): k must be 1 and "
+            "stride and sample_recent off",
+        ),
+    ]
+    for ok, message in ob2i_rnd_checks:
+        if not ok:
+            raise ConfigError(message)
+    if cfg.adaptive_k.enabled and cfg.algo not in ("farsighter", "farsighter-naf"):
+        raise ConfigError(
+            "adaptive_k.enabled is only supported by --algo farsighter and farsighter-naf"
+        )
+    n = cfg.naf
+    naf_checks: list[tuple[bool, str]] = [
+        (0.0 < n.tau <= 1.0, f"naf.tau must be in (0, 1] (got {n.tau})"),
+        (n.updates_per_step >= 1, "naf.updates_per_step must be >= 1"),
+        (n.noise_std >= 0, f"naf.noise_std must be >= 0 (got {n.noise_std})"),
+        (0.0 < n.ou_theta <= 1.0, f"naf.ou_theta must be in (0, 1] (got {n.ou_theta})"),
+        (
+            len(n.hidden_sizes) >= 1 and all(h > 0 for h in n.hidden_sizes),
+            "naf.hidden_sizes must be one or more positive integers",
+        ),
+        (n.prior_std > 0, f"naf.prior_std must be > 0 (got {n.prior_std})"),
+        (n.init_sigma > 0, f"naf.init_sigma must be > 0 (got {n.init_sigma})"),
+        (n.noise_std_eps > 0, f"naf.noise_std_eps must be > 0 (got {n.noise_std_eps})"),
+        (n.elbo_every >= 1, "naf.elbo_every must be >= 1"),
+        (n.elbo_steps >= 0, "naf.elbo_steps must be >= 0"),
+        (n.elbo_batch >= 1, "naf.elbo_batch must be >= 1"),
+        (n.elbo_lr > 0 and n.elbo_rho_lr > 0, "naf.elbo_lr and naf.elbo_rho_lr must be > 0"),
+        (n.kl_weight >= 0, "naf.kl_weight must be >= 0"),
+        (n.mu_penalty >= 0, "naf.mu_penalty must be >= 0"),
+        (0.0 <= n.her_ratio <= 1.0, f"naf.her_ratio must be in [0, 1] (got {n.her_ratio})"),
+        (not n.her or cfg.algo in NAF_ALGORITHMS, "naf.her needs a continuous agent (naf, ...)"),
+        (
+            cfg.algo not in NAF_ALGORITHMS or n.elbo_batch <= cfg.buffer_size,
+            f"naf.elbo_batch ({n.elbo_batch}) must not exceed buffer_size ({cfg.buffer_size})",
+        ),
+    ]
+    for ok, message in naf_checks:
+        if not ok:
+            raise ConfigError(message)
     if cfg.device not in ("auto", "cpu", "cuda") and not cfg.device.startswith("cuda:"):
         raise ConfigError(f"unknown device '{cfg.device}'; accepted: auto, cpu, cuda, cuda:N")
 

@@ -60,6 +60,23 @@ class Batch:
     """Logical row index of each start."""
 
 
+@dataclass
+class Episode:
+    """One complete episode held in the replay: its transitions are the logical rows
+    ``start .. start + length - 1`` of stream ``env`` and row ``start + length`` is its final row
+    (the last observation), so state s_t is row ``start + t`` for t = 0..length."""
+
+    env: int
+    start: int
+    length: int
+    actions: np.ndarray
+    """a_t, t = 0..length-1."""
+    rewards: np.ndarray
+    """r_t, t = 0..length-1 (float32)."""
+    terminated: bool
+    """The last step terminated the episode (no bootstrap); False for a time-limit truncation."""
+
+
 class ReplayBuffer:
     """Circular replay over ``num_envs`` streams with frame stacking and k-step sampling."""
 
@@ -296,6 +313,59 @@ class ReplayBuffer:
         """k-step batch at the given candidate starts, keeping only the valid ones."""
         ok_B, _ = self.valid_mask(e_B, start_B, k, stride)
         return self._gather(e_B[ok_B], start_B[ok_B], k, gamma)
+
+    # ------------------------------------------------------------------ whole episodes
+    def episode_bounds(self) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """(stream, logical start, length) of every complete episode whose rows are all live.
+
+        An episode ends with a final row F whose ``t_ep`` is the episode length T, so its
+        transitions are rows F - T .. F - 1. It is complete once F is written and fully live when
+        F - T is not below the live range (wraparound, ``clear``). Frames from before an episode
+        start are zeros in the stacks, so no row outside the episode is needed.
+        """
+        es, starts, lengths = [], [], []
+        low_E = self._low()
+        for e in range(self.num_envs):
+            hi = int(self.count[e])
+            if hi <= low_E[e]:
+                continue
+            slots = np.flatnonzero(self.flags[e] & FINAL).astype(np.int64)
+            # The logical row held by each slot: the latest L < hi with L % capacity == slot.
+            final = slots + (hi - 1 - slots) // self.capacity * self.capacity
+            length = self.t_ep[e, slots].astype(np.int64)
+            start = final - length
+            keep = (final < hi) & (start >= low_E[e]) & (length > 0)
+            order = np.argsort(start[keep], kind="stable")
+            es.append(np.full(int(keep.sum()), e, dtype=np.int64))
+            starts.append(start[keep][order])
+            lengths.append(length[keep][order])
+        if not es:
+            empty = np.zeros(0, dtype=np.int64)
+            return empty, empty.copy(), empty.copy()
+        return np.concatenate(es), np.concatenate(starts), np.concatenate(lengths)
+
+    def sample_episode(self, rng: np.random.Generator | None = None) -> Episode:
+        """A complete, fully live episode drawn uniformly (EBU samples whole episodes, Lee et al.
+        2019). Only its actions and rewards are copied; gather its observations in chunks with
+        ``stacked_obs(env, start + t)``."""
+        e_N, start_N, length_N = self.episode_bounds()
+        if len(e_N) == 0:
+            raise ValueError("no complete episode in the replay buffer yet; collect more steps")
+        i = int((self.rng if rng is None else rng).integers(len(e_N)))
+        e, start, length = int(e_N[i]), int(start_N[i]), int(length_N[i])
+        slots = (start + np.arange(length)) % self.capacity
+        return Episode(
+            env=e,
+            start=start,
+            length=length,
+            actions=self.actions[e, slots].copy(),
+            rewards=self.rewards[e, slots].copy(),
+            terminated=bool(self.flags[e, slots[-1]] & TERMINATED),
+        )
+
+    def is_live(self, e: int, logical: int) -> bool:
+        """Row ``logical`` of stream ``e`` (and every later written row) is still stored."""
+        return bool(self._low()[e] <= logical < self.count[e])
 
     # ------------------------------------------------------------------ checkpointing
     def state_dict(self) -> dict[str, Any]:

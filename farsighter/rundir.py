@@ -30,6 +30,12 @@ METRIC_COLUMNS = (
     "k",
 )
 EVAL_COLUMNS = ("global_step", "eval_return_mean", "eval_return_std", "eval_episodes")
+# Goal-conditioned tasks only (created on the first episode that reports info["is_success"]),
+# so metrics.csv keeps its fixed columns for every run.
+SUCCESS_FILE = "success.csv"
+SUCCESS_COLUMNS = ("global_step", "episode", "success")
+EVAL_SUCCESS_FILE = "eval_success.csv"
+EVAL_SUCCESS_COLUMNS = ("global_step", "eval_success_rate", "eval_episodes")
 
 # Fields that may differ between the original command and its --resume.
 RESUMABLE_FIELDS = {
@@ -149,17 +155,32 @@ class RunLogger:
         from torch.utils.tensorboard import SummaryWriter
 
         if resume_step is not None:
-            truncate_csv(path / METRICS_FILE, resume_step)
-            truncate_csv(path / EVAL_FILE, resume_step)
+            for name in (METRICS_FILE, EVAL_FILE, SUCCESS_FILE, EVAL_SUCCESS_FILE):
+                truncate_csv(path / name, resume_step)
+        self.path = path
         self.metrics = CsvLog(path / METRICS_FILE, METRIC_COLUMNS)
         self.eval = CsvLog(path / EVAL_FILE, EVAL_COLUMNS)
+        self._success: dict[str, CsvLog] = {}
         # purge_step discards events written after the checkpoint by the interrupted process.
         self.tb = SummaryWriter(str(path), purge_step=resume_step)
 
     def scalar(self, tag: str, value: float, step: int) -> None:
         self.tb.add_scalar(tag, value, step)
 
+    def success(self, row: dict[str, Any], evaluation: bool = False) -> None:
+        """A row of success.csv (training episodes) or eval_success.csv (evaluation phases)."""
+        name, columns = (
+            (EVAL_SUCCESS_FILE, EVAL_SUCCESS_COLUMNS)
+            if evaluation
+            else (SUCCESS_FILE, SUCCESS_COLUMNS)
+        )
+        if name not in self._success:
+            self._success[name] = CsvLog(self.path / name, columns)
+        self._success[name].write(row)
+
     def close(self) -> None:
         self.metrics.close()
         self.eval.close()
+        for log in self._success.values():
+            log.close()
         self.tb.close()

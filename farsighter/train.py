@@ -51,29 +51,50 @@ class LoopState:
     best_eval: float = float("-inf")
     last_eval: float = float("nan")
     recent_returns: deque[float] = field(default_factory=lambda: deque(maxlen=20))
+    recent_successes: deque[float] = field(default_factory=lambda: deque(maxlen=20))
 
 
-def evaluate(
+@dataclass
+class EvalResult:
+    """Returns of the evaluation episodes, and ``info["is_success"]`` at each episode's end
+    (goal-conditioned tasks; empty when the environment does not report it)."""
+
+    returns: list[float]
+    successes: list[float]
+
+
+def evaluate_episodes(
     agent: Any, cfg: Config, env: gym.Env, episodes: int, seed: int, global_step: int
-) -> list[float]:
-    """Greedy episodes (eval_epsilon-greedy) on an unclipped, non-life-loss environment."""
+) -> EvalResult:
+    """Greedy episodes (eval_epsilon-greedy for discrete actions; the posterior mean / noiseless
+    mu for continuous ones) on an unclipped, non-life-loss environment."""
     rng = np.random.default_rng(seed)
     returns: list[float] = []
+    successes: list[float] = []
     n_actions = int(env.action_space.n) if isinstance(env.action_space, gym.spaces.Discrete) else 0
     for i in range(episodes):
-        obs, _ = env.reset(seed=seed if i == 0 else None)
+        obs, info = env.reset(seed=seed if i == 0 else None)
         total, steps, done = 0.0, 0, False
         while not done and steps < cfg.eval_max_steps:
             if n_actions and rng.random() < cfg.eval_epsilon:
                 action = int(rng.integers(n_actions))
             else:
                 action = agent.act(np.asarray(obs)[None], global_step, explore=False)[0]
-            obs, reward, terminated, truncated, _ = env.step(action)
+            obs, reward, terminated, truncated, info = env.step(action)
             total += float(reward)
             steps += 1
             done = terminated or truncated
         returns.append(total)
-    return returns
+        if "is_success" in info:
+            successes.append(float(info["is_success"]))
+    return EvalResult(returns, successes)
+
+
+def evaluate(
+    agent: Any, cfg: Config, env: gym.Env, episodes: int, seed: int, global_step: int
+) -> list[float]:
+    """Returns of greedy evaluation episodes (see :func:`evaluate_episodes`)."""
+    return evaluate_episodes(agent, cfg, env, episodes, seed, global_step).returns
 
 
 def _final_obs(info: dict[str, Any], num_envs: int) -> list[Any] | None:
@@ -89,6 +110,19 @@ def _finished_episodes(info: dict[str, Any]) -> list[tuple[float, int]]:
         return []
     ep, mask = final["episode"], final["_episode"]
     return [(float(ep["r"][i]), int(ep["l"][i])) for i in np.flatnonzero(mask)]
+
+
+def _finished_successes(info: dict[str, Any]) -> list[float | None]:
+    """``info["is_success"]`` of the episodes of :func:`_finished_episodes`, in the same order
+    (None where the environment does not report it)."""
+    final = info.get("final_info")
+    if not final or "episode" not in final:
+        return []
+    has = final.get("_is_success")
+    return [
+        float(final["is_success"][i]) if has is not None and has[i] else None
+        for i in np.flatnonzero(final["_episode"])
+    ]
 
 
 def _pickle_envs(envs: gym.vector.VectorEnv) -> bytes | None:
@@ -136,6 +170,7 @@ def train(cfg: Config, callbacks: Sequence[Callback] = ()) -> dict[str, Any]:
         )
         state.best_eval, state.last_eval = loop["best_eval"], loop["last_eval"]
         state.recent_returns.extend(loop["recent_returns"])
+        state.recent_successes.extend(loop.get("recent_successes", []))
         resumed_loss = loop.get("loss_value", float("nan"))
         if checkpoint.get("envs") is not None:
             envs.close()
@@ -177,6 +212,7 @@ def train(cfg: Config, callbacks: Sequence[Callback] = ()) -> dict[str, Any]:
                     "best_eval": state.best_eval,
                     "last_eval": state.last_eval,
                     "recent_returns": list(state.recent_returns),
+                    "recent_successes": list(state.recent_successes),
                     "loss_value": loss_value,
                 },
                 "agent": agent.state_dict(include_replay=cfg.save_replay),
@@ -188,7 +224,7 @@ def train(cfg: Config, callbacks: Sequence[Callback] = ()) -> dict[str, Any]:
 
     def run_eval() -> None:
         state.evals += 1
-        returns = evaluate(
+        result = evaluate_episodes(
             agent,
             cfg,
             eval_env,
@@ -196,7 +232,19 @@ def train(cfg: Config, callbacks: Sequence[Callback] = ()) -> dict[str, Any]:
             cfg.seed + 7919 * state.evals,
             state.global_step,
         )
+        returns = result.returns
         mean, std = float(np.mean(returns)), float(np.std(returns))
+        if result.successes:  # goal-conditioned tasks: eval/success_rate
+            rate = float(np.mean(result.successes))
+            logger.success(
+                {
+                    "global_step": state.global_step,
+                    "eval_success_rate": rate,
+                    "eval_episodes": len(result.successes),
+                },
+                evaluation=True,
+            )
+            logger.scalar("eval/success_rate", rate, state.global_step)
         state.last_eval, state.best_eval = mean, max(state.best_eval, mean)
         logger.eval.write(
             {
@@ -229,8 +277,21 @@ def train(cfg: Config, callbacks: Sequence[Callback] = ()) -> dict[str, Any]:
 
             for callback in callbacks:
                 callback.on_step(state.global_step, info, agent)
-            for ep_return, ep_length in _finished_episodes(info):
+            for (ep_return, ep_length), success in zip(
+                _finished_episodes(info), _finished_successes(info), strict=True
+            ):
                 state.episodes += 1
+                if success is not None:  # goal-conditioned tasks: success.csv, not metrics.csv
+                    state.recent_successes.append(success)
+                    logger.success(
+                        {"global_step": state.global_step, "episode": state.episodes,
+                         "success": success}
+                    )
+                    logger.scalar(
+                        "charts/success_rate",
+                        float(np.mean(state.recent_successes)),
+                        state.global_step,
+                    )
                 state.recent_returns.append(ep_return)
                 diag = agent.diagnostics()
                 logger.metrics.write(

@@ -34,7 +34,8 @@ def tiny(algo: str, run_dir: Path, env: str = "CartPole-v1", **kw: Any) -> Confi
         blr__posterior_samples=500,
     )
     values.update(kw)
-    return make_config(algo, env, preset="control", **values)
+    preset = values.pop("preset", "control")
+    return make_config(algo, env, preset=preset, **values)
 
 
 @pytest.fixture

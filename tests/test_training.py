@@ -29,7 +29,7 @@ def weights(run_dir: Path) -> dict[str, torch.Tensor]:
     return state["q"] if "q" in state else state["torso"]
 
 
-@pytest.mark.parametrize("algo", ["ddqn", "kddqn", "bdqn", "farsighter"])
+@pytest.mark.parametrize("algo", ["ddqn", "kddqn", "bdqn", "farsighter", "ob2i", "krnd"])
 def test_run_directory_outputs(tmp_path: Path, algo: str) -> None:
     summary = farsighter.train(tiny(algo, tmp_path / "run"))
     run = Path(summary["run_dir"])
@@ -49,7 +49,7 @@ def test_run_directory_outputs(tmp_path: Path, algo: str) -> None:
     assert np.isfinite(summary["final_eval_return"])
 
 
-@pytest.mark.parametrize("algo", ["ddqn", "farsighter"])
+@pytest.mark.parametrize("algo", ["ddqn", "farsighter", "ob2i", "krnd"])
 def test_same_seed_same_run_on_cpu(tmp_path: Path, algo: str) -> None:
     farsighter.train(tiny(algo, tmp_path / "a", total_steps=1_000))
     farsighter.train(tiny(algo, tmp_path / "b", total_steps=1_000))
@@ -60,7 +60,7 @@ def test_same_seed_same_run_on_cpu(tmp_path: Path, algo: str) -> None:
     assert metric_rows(tmp_path / "a") != metric_rows(tmp_path / "c")
 
 
-@pytest.mark.parametrize("algo", ["kddqn", "farsighter"])
+@pytest.mark.parametrize("algo", ["kddqn", "farsighter", "ob2i", "krnd"])
 def test_crash_then_resume_equals_uninterrupted(
     tmp_path: Path, algo: str, monkeypatch: pytest.MonkeyPatch
 ) -> None:

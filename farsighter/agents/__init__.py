@@ -37,4 +37,16 @@ def build_agent(
         from farsighter.agents.farsighter import FarsighterAgent
 
         return FarsighterAgent(cfg, obs_space, act_space, frame_stack=frame_stack, device=device)  # type: ignore[arg-type]
+    if cfg.algo == "ob2i":
+        from farsighter.agents.ob2i import OB2IAgent
+
+        return OB2IAgent(cfg, obs_space, act_space, frame_stack=frame_stack, device=device)  # type: ignore[arg-type]
+    if cfg.algo in ("rnd", "krnd"):
+        from farsighter.agents.rnd import RNDAgent
+
+        return RNDAgent(cfg, obs_space, act_space, frame_stack=frame_stack, device=device)  # type: ignore[arg-type]
+    if cfg.algo in ("naf", "knaf", "bnaf", "farsighter-naf"):
+        from farsighter.agents.naf import NAFAgent
+
+        return NAFAgent(cfg, obs_space, act_space, frame_stack=frame_stack, device=device)  # type: ignore[arg-type]
     raise ConfigError(unknown_algo_message(cfg.algo))

@@ -36,18 +36,28 @@ def linear_schedule(start: float, end: float, duration: int, step: int) -> float
 
 
 def make_replay(
-    cfg: Config, obs_space: gym.spaces.Box, frame_stack: int, seed: int
+    cfg: Config,
+    obs_space: gym.spaces.Box,
+    frame_stack: int,
+    seed: int,
+    act_space: gym.Space | None = None,
 ) -> ReplayBuffer:
-    """A replay buffer sized for the run; uint8 images keep one byte per pixel."""
+    """A replay buffer sized for the run; uint8 images keep one byte per pixel. Discrete actions
+    are stored as int32; Box actions (``act_space``) as float32 vectors of their shape."""
     shape = obs_space.shape
     assert shape is not None
+    action_shape: tuple[int, ...] = ()
+    action_dtype: Any = np.int32
+    if isinstance(act_space, gym.spaces.Box):
+        action_shape, action_dtype = tuple(act_space.shape), np.float32
     return ReplayBuffer(
         cfg.buffer_size,
         tuple(shape),
         obs_space.dtype,
         num_envs=cfg.num_envs,
         frame_stack=frame_stack,
-        action_dtype=np.int32,
+        action_shape=action_shape,
+        action_dtype=action_dtype,
         seed=seed,
     )
 
@@ -61,7 +71,11 @@ def batch_tensors(batch: Batch, device: torch.device) -> dict[str, torch.Tensor]
     return {
         "obs": obs_tensor(batch.obs, device),
         "next_obs": obs_tensor(batch.next_obs, device),
-        "actions": torch.as_tensor(batch.actions, device=device, dtype=torch.int64),
+        "actions": torch.as_tensor(
+            batch.actions,
+            device=device,
+            dtype=torch.int64 if batch.actions.dtype.kind in "iu" else torch.float32,
+        ),
         "returns": torch.as_tensor(batch.returns, device=device),
         "bootstrap": torch.as_tensor(batch.bootstrap, device=device),
     }
@@ -99,3 +113,54 @@ def build_seeded(seed: int, fn: Any) -> Any:
     with torch.random.fork_rng(devices=[]):
         torch.manual_seed(seed)
         return fn()
+
+
+def epsilon_greedy(
+    rng: np.random.Generator,
+    epsilon: float,
+    num_actions: int,
+    greedy: Any,
+    n: int,
+) -> np.ndarray:
+    """Epsilon-greedy actions for ``n`` environments; ``greedy()`` (the forward pass) is only
+    called when some environment acts greedily."""
+    random_E = np.asarray(rng.random(n) < epsilon)
+    random_actions_E = np.asarray(rng.integers(0, num_actions, size=n))
+    if random_E.all():
+        return random_actions_E
+    return np.where(random_E, random_actions_E, greedy())
+
+
+class RunningMeanStd:
+    """Running mean and variance over batches (Chan et al.'s parallel update, as in OpenAI
+    baselines' ``RunningMeanStd``, which RND and OB2I's code use to normalise bonuses)."""
+
+    def __init__(self, shape: tuple[int, ...] = (), epsilon: float = 1e-4) -> None:
+        self.mean = np.zeros(shape, dtype=np.float64)
+        self.var = np.ones(shape, dtype=np.float64)
+        self.count = epsilon  # a tiny prior count keeps the first update well defined
+
+    def update(self, x_N: np.ndarray) -> None:
+        """Add the rows of ``x_N`` (the first axis indexes samples)."""
+        x = np.asarray(x_N, dtype=np.float64).reshape(-1, *self.mean.shape)
+        if len(x) == 0:
+            return
+        batch_mean, batch_var, n = x.mean(axis=0), x.var(axis=0), len(x)
+        delta = batch_mean - self.mean
+        total = self.count + n
+        self.mean = self.mean + delta * n / total
+        m2 = self.var * self.count + batch_var * n + delta**2 * self.count * n / total
+        self.var = m2 / total
+        self.count = total
+
+    @property
+    def std(self) -> np.ndarray:
+        return np.sqrt(self.var)
+
+    def state_dict(self) -> dict[str, Any]:
+        return {"mean": self.mean.copy(), "var": self.var.copy(), "count": self.count}
+
+    def load_state_dict(self, state: dict[str, Any]) -> None:
+        self.mean = np.array(state["mean"], dtype=np.float64)
+        self.var = np.array(state["var"], dtype=np.float64)
+        self.count = float(state["count"])

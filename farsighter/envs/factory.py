@@ -1,15 +1,33 @@
-"""One environment factory for every agent: any Gymnasium id, Atari preprocessing for ALE ids."""
+"""One environment factory for every agent: any Gymnasium id, Atari preprocessing for ALE ids,
+goal-conditioned (dict-observation) robotics tasks flattened to vectors."""
 
 from __future__ import annotations
 
+import contextlib
 import importlib
+import io
+from collections.abc import Callable
+from dataclasses import dataclass
 from functools import partial
 from typing import Any
 
 import gymnasium as gym
+import numpy as np
 
-from farsighter.config import Config, is_atari_id
+from farsighter.config import NAF_ALGORITHMS, Config, is_atari_id
 from farsighter.errors import EnvError
+
+# Ids registered by gymnasium-robotics (imported lazily: it is an optional extra).
+ROBOTICS_PREFIXES = (
+    "Fetch",
+    "HandManipulate",
+    "HandReach",
+    "AdroitHand",
+    "AntMaze",
+    "PointMaze",
+    "FrankaKitchen",
+)
+MUJOCO_EXTRA = "install the MuJoCo extra: pip install 'farsighter[mujoco]'"
 
 
 def _first_line(exc: BaseException) -> str:
@@ -22,8 +40,23 @@ def _register_builtin() -> None:
     importlib.import_module("farsighter.envs.maze")
 
 
+def _register_robotics(env_id: str) -> None:
+    """Register gymnasium-robotics' ids on first use of one of them."""
+    name = env_id.split(":")[-1]
+    if ":" in env_id or name in gym.registry or not name.startswith(ROBOTICS_PREFIXES):
+        return
+    try:
+        # Its import prints a notice about Adroit reward versions to stderr; not ours to show.
+        with contextlib.redirect_stderr(io.StringIO()):
+            import gymnasium_robotics
+    except ImportError:
+        raise EnvError(f"'{env_id}' is a gymnasium-robotics task; {MUJOCO_EXTRA}") from None
+    gym.register_envs(gymnasium_robotics)
+
+
 def _make_base(env_id: str, cfg: Config, render_mode: str | None) -> gym.Env:
     _register_builtin()
+    _register_robotics(env_id)
     kwargs: dict[str, Any] = {}
     if render_mode is not None:
         kwargs["render_mode"] = render_mode
@@ -41,6 +74,10 @@ def _make_base(env_id: str, cfg: Config, render_mode: str | None) -> gym.Env:
         kwargs["repeat_action_probability"] = cfg.atari.repeat_action_probability
     try:
         return gym.make(env_id, **kwargs)
+    except gym.error.DependencyNotInstalled as exc:
+        if "mujoco" in str(exc).lower():
+            raise EnvError(f"'{env_id}' needs MuJoCo; {MUJOCO_EXTRA}") from None
+        raise EnvError(f"cannot make environment '{env_id}': {_first_line(exc)}") from None
     except (gym.error.Error, ImportError, AttributeError) as exc:
         raise EnvError(
             f"cannot make environment '{env_id}': {_first_line(exc)} (accepted: any registered "
@@ -59,6 +96,8 @@ def make_env(
     if is_atari_id(cfg.env):
         env = _wrap_atari(env, cfg, training)
     else:
+        if is_goal_space(env.observation_space):
+            env = FlattenGoalObservation(env, include_achieved=cfg.naf.her)
         env = gym.wrappers.RecordEpisodeStatistics(env)
     env.action_space.seed(seed)
     env.observation_space.seed(seed)
@@ -94,6 +133,80 @@ def make_vector_env(cfg: Config, *, seed: int) -> gym.vector.SyncVectorEnv:
     )
 
 
+def is_goal_space(space: gym.Space) -> bool:
+    """A goal-conditioned observation space (gymnasium-robotics' GoalEnv convention)."""
+    return isinstance(space, gym.spaces.Dict) and {
+        "observation",
+        "achieved_goal",
+        "desired_goal",
+    } <= set(space.spaces)
+
+
+class FlattenGoalObservation(gym.ObservationWrapper):
+    """Dict observations of goal-conditioned tasks as one float32 vector (SPEC 2.2):
+    ``[observation, desired_goal]``, or ``[observation, achieved_goal, desired_goal]`` with
+    ``include_achieved`` (hindsight replay reads achieved goals back from stored rows)."""
+
+    def __init__(self, env: gym.Env, include_achieved: bool = False) -> None:
+        super().__init__(env)
+        spaces = env.observation_space.spaces  # type: ignore[attr-defined]
+        self.keys: tuple[str, ...] = (
+            ("observation", "achieved_goal", "desired_goal")
+            if include_achieved
+            else ("observation", "desired_goal")
+        )
+        parts = [spaces[k] for k in self.keys]
+        low = np.concatenate([np.broadcast_to(p.low, p.shape).ravel() for p in parts])
+        high = np.concatenate([np.broadcast_to(p.high, p.shape).ravel() for p in parts])
+        self.observation_space = gym.spaces.Box(
+            low.astype(np.float32), high.astype(np.float32), dtype=np.float32
+        )
+        self.obs_dim = int(np.prod(spaces["observation"].shape))
+        self.goal_dim = int(np.prod(spaces["desired_goal"].shape))
+
+    def observation(self, observation: dict[str, Any]) -> np.ndarray:
+        return np.concatenate(
+            [np.asarray(observation[k], dtype=np.float32).ravel() for k in self.keys]
+        )
+
+
+@dataclass(frozen=True)
+class GoalSpec:
+    """Layout of a flattened goal observation ``[observation, achieved_goal, desired_goal]`` and
+    the task's reward function, for hindsight relabelling."""
+
+    obs_dim: int
+    goal_dim: int
+    compute_reward: Callable[[np.ndarray, np.ndarray, Any], np.ndarray]
+    """``compute_reward(achieved_NG, desired_NG, None) -> reward_N`` of the unwrapped task."""
+
+    @property
+    def achieved(self) -> slice:
+        return slice(self.obs_dim, self.obs_dim + self.goal_dim)
+
+    @property
+    def desired(self) -> slice:
+        return slice(self.obs_dim + self.goal_dim, self.obs_dim + 2 * self.goal_dim)
+
+
+def goal_spec(cfg: Config) -> GoalSpec:
+    """The goal layout and reward function of ``cfg.env`` (which must be goal-conditioned)."""
+    env = _make_base(cfg.env, cfg, None)
+    if not is_goal_space(env.observation_space):
+        env.close()
+        raise EnvError(
+            f"'{cfg.env}' has no goal-conditioned dict observations; naf.her needs one "
+            "(accepted: gymnasium-robotics tasks such as FetchPickAndPlace-v4)"
+        )
+    spaces = env.observation_space.spaces  # type: ignore[attr-defined]
+    # The bound method keeps this one environment alive for the agent's lifetime.
+    return GoalSpec(
+        obs_dim=int(np.prod(spaces["observation"].shape)),
+        goal_dim=int(np.prod(spaces["desired_goal"].shape)),
+        compute_reward=env.unwrapped.compute_reward,  # type: ignore[attr-defined]
+    )
+
+
 def frame_stack_of(cfg: Config) -> int:
     """Frames per observation that the replay should rebuild (1: store observations whole)."""
     return cfg.atari.frame_stack if is_atari_id(cfg.env) else 1
@@ -101,11 +214,21 @@ def frame_stack_of(cfg: Config) -> int:
 
 def check_spaces(algo: str, obs_space: gym.Space, act_space: gym.Space) -> None:
     """Raise a one-line EnvError when an algorithm cannot handle the spaces."""
-    discrete_algos = {"ddqn", "kddqn", "bdqn", "farsighter", "ob2i", "rnd", "krnd"}
-    if algo in discrete_algos and not isinstance(act_space, gym.spaces.Discrete):
+    if algo in NAF_ALGORITHMS:
+        if not isinstance(act_space, gym.spaces.Box) or len(act_space.shape) != 1:
+            raise EnvError(
+                f"algorithm '{algo}' needs a continuous (Box, 1-d) action space; this environment "
+                f"has {act_space} (for discrete actions use ddqn, kddqn, bdqn or farsighter)"
+            )
+        if not (np.isfinite(act_space.low).all() and np.isfinite(act_space.high).all()):
+            raise EnvError(
+                f"algorithm '{algo}' needs finite action bounds (mu is tanh-scaled to them); "
+                f"this environment has {act_space}"
+            )
+    elif not isinstance(act_space, gym.spaces.Discrete):
         raise EnvError(
             f"algorithm '{algo}' needs a discrete action space; this environment has {act_space} "
-            "(continuous agents naf, knaf, bnaf, farsighter-naf are planned)"
+            "(for continuous actions use naf, knaf, bnaf or farsighter-naf)"
         )
     if not isinstance(obs_space, gym.spaces.Box):
         raise EnvError(

@@ -1,0 +1,348 @@
+"""OB2I (Bai et al. 2021, "Principled exploration via optimistic bootstrapping and backward
+induction"), as the authors' code runs it (Baichenjia/OB2I, ``--ebu --reward-type ucb``; SPEC 2.3).
+
+Network: a shared torso phi(s) (MLP, or the Nature CNN for images) and K linear heads,
+Q_k(s, .) = W_k phi(s) + b_k. Every head learns from every sample (no bootstrap masks).
+
+Acting: one head k_e drawn uniformly per episode and environment; epsilon-greedy on Q_{k_e} with
+epsilon annealed linearly from eps_start to eps_end (1.0 -> 0.1). Evaluation: majority vote of
+the heads (the authors' evaluation), ties broken by the heads' mean Q.
+
+Formulas implemented (OB2I section 3; symbols as in the paper, equation numbers not repeated):
+
+* UCB-bonus, the std of the bootstrapped Q-estimates (OB2I's B^k):
+      B(s, a) = sqrt( (1/K) sum_k (Q_k(s, a) - mean_j Q_j(s, a))^2 )
+* For a sampled episode s_0, a_0, r_0, ..., s_T (the episodic backward update of EBU, Lee et al.
+  2019, Algorithm 2), with Q~[t] = Q_target(s_{t+1}, .) for every head (T x K x A values):
+      immediate bonus   rb_t     = alpha_1 * B_online(s_t, a_t)            (/ running std if set)
+      next bonus        nb_{t,k} = alpha_2 * B_target(s_{t+1}, a'_{t,k}) / sigma_nb
+                                   * 1[a'_{t,k} != a_{t+1}],  a'_{t,k} = argmax_a Q~_k[t, a]
+  where sigma_nb is a running std of the unnormalised next-state bonuses (OB2I's B~ term of the
+  target); the indicator (authors' code) drops the next-state bonus where a head's greedy action
+  is the action taken next, whose Q~ already holds the propagated target (which carries bonus).
+* Backward, t = T-1, ..., 0 (OB2I's optimistic target y^k_t and its backward induction):
+      y_{t,k} = r_t + rb_t                                          if t = T-1 and s_T terminal
+      y_{t,k} = r_t + rb_t + gamma * (max_a Q~_k[t, a] + nb_{t,k})   otherwise
+      Q~_k[t-1, a_t] <- beta * y_{t,k} + (1 - beta) * Q~_k[t-1, a_t]   (t >= 1: Q~[t-1] is at s_t)
+  A time-limit truncation bootstraps from the real last state s_T, as everywhere in this library.
+* Loss on a minibatch of the episode: L = mean_{b,k} huber(Q_k(s_b, a_b) - y_{b,k}) / K (the
+  authors' ``gradient_norm``: the loss divided by K). As in EBU, the targets of an episode are
+  computed once and consumed one minibatch per update, in chunks of batch_size going backward
+  from the episode end; only Q~ (T x K x A floats) is held, frames are gathered per chunk.
+"""
+
+from __future__ import annotations
+
+import copy
+from typing import Any
+
+import gymnasium as gym
+import numpy as np
+import torch
+from torch import nn
+
+from farsighter.agents.common import (
+    RunningMeanStd,
+    build_seeded,
+    clip_and_step,
+    epsilon_greedy,
+    linear_schedule,
+    make_optimizer,
+    make_replay,
+    obs_tensor,
+    td_loss,
+    updates_due,
+)
+from farsighter.config import Config
+from farsighter.networks import make_torso
+from farsighter.replay import Episode
+
+BONUS_EPS = 1e-8  # keeps the running-std division finite when every bonus is zero
+
+
+class EnsembleQNetwork(nn.Module):
+    """Shared torso and K linear heads in one layer: forward gives Q (B, K, A)."""
+
+    def __init__(
+        self,
+        obs_space: gym.spaces.Box,
+        num_actions: int,
+        num_heads: int,
+        hidden_sizes: tuple[int, ...],
+    ) -> None:
+        super().__init__()
+        self.torso = make_torso(obs_space, hidden_sizes)
+        # One Linear with K*A rows initialises each head exactly as K separate Linear(d, A).
+        self.heads = nn.Linear(self.torso.out_dim, num_heads * num_actions)
+        self.num_heads, self.num_actions = num_heads, num_actions
+
+    def forward(self, obs: torch.Tensor) -> torch.Tensor:
+        return self.heads(self.torso(obs)).view(-1, self.num_heads, self.num_actions)
+
+
+def ucb_bonus(q_BKA: torch.Tensor) -> torch.Tensor:
+    """OB2I's UCB-bonus B(s, a): the (population) std of Q over the heads, (B, K, A) -> (B, A)."""
+    return q_BKA.std(dim=1, unbiased=False)
+
+
+def ensemble_td_loss(q_BK: torch.Tensor, y_BK: torch.Tensor, kind: str) -> torch.Tensor:
+    """Every head on every sample, mean TD loss divided by K (authors' ``gradient_norm``)."""
+    return td_loss(q_BK, y_BK, kind) / q_BK.shape[1]
+
+
+def next_state_bonus(
+    q_next_TKA: np.ndarray, taken_next_T: np.ndarray
+) -> tuple[np.ndarray, np.ndarray]:
+    """Unnormalised next-state bonus B_target(s_{t+1}, a'_{t,k}) at each head's greedy action
+    a'_{t,k} = argmax_a Q~_k(s_{t+1}, a), and the indicator 1[a'_{t,k} != a_{t+1}] (authors' code;
+    ``taken_next_T[t]`` is a_{t+1}, or -1 after the last step). Both (T, K)."""
+    a_star_TK = q_next_TKA.argmax(axis=2)
+    bonus_TK = np.take_along_axis(q_next_TKA.std(axis=1), a_star_TK, axis=1)
+    return bonus_TK, a_star_TK != taken_next_T[:, None]
+
+
+def backward_targets(
+    rewards_T: np.ndarray,
+    actions_T: np.ndarray,
+    q_next_TKA: np.ndarray,
+    bonus_next_TK: np.ndarray,
+    terminated: bool,
+    gamma: float,
+    beta: float,
+) -> np.ndarray:
+    """Targets y (T, K) of one episode by backward induction (EBU with OB2I's optimistic target).
+
+    ``rewards_T`` already include the immediate bonus; ``q_next_TKA[t]`` is Q_target(s_{t+1}, .)
+    per head and is not modified; ``bonus_next_TK`` is the weighted next-state bonus.
+    """
+    q_TKA = np.array(q_next_TKA, dtype=np.float64)  # a copy: the recursion overwrites it
+    length = len(rewards_T)
+    y_TK = np.empty(q_TKA.shape[:2], dtype=np.float64)
+    for t in range(length - 1, -1, -1):
+        if t == length - 1 and terminated:
+            y_TK[t] = rewards_T[t]  # a terminal end gets no bootstrap
+        else:
+            y_TK[t] = rewards_T[t] + gamma * (q_TKA[t].max(axis=1) + bonus_next_TK[t])
+        if t > 0:  # diffuse y_t into Q~(s_t, a_t), which bootstraps y_{t-1}
+            a = int(actions_T[t])
+            q_TKA[t - 1, :, a] = beta * y_TK[t] + (1.0 - beta) * q_TKA[t - 1, :, a]
+    return y_TK.astype(np.float32)
+
+
+class OB2IAgent:
+    """Bootstrapped heads with UCB-bonus and episodic backward update (module docstring)."""
+
+    def __init__(
+        self,
+        cfg: Config,
+        obs_space: gym.spaces.Box,
+        act_space: gym.spaces.Discrete,
+        *,
+        frame_stack: int,
+        device: torch.device,
+    ) -> None:
+        self.cfg = cfg
+        self.device = device
+        self.num_actions = int(act_space.n)
+        self.num_heads = cfg.ob2i.num_heads
+        self.q = build_seeded(
+            cfg.seed,
+            lambda: EnsembleQNetwork(obs_space, self.num_actions, self.num_heads, cfg.hidden_sizes),
+        ).to(device)
+        self.q_target = copy.deepcopy(self.q).requires_grad_(False)
+        self.opt = make_optimizer(self.q.parameters(), cfg)
+        self.replay = make_replay(cfg, obs_space, frame_stack, seed=cfg.seed + 1)
+        self.rng = np.random.default_rng(cfg.seed + 2)
+        self.head_E = self.rng.integers(0, self.num_heads, size=cfg.num_envs)
+        self.next_bonus_rms = RunningMeanStd()
+        self.reward_bonus_rms = RunningMeanStd()
+        self.updates = 0
+        self.target_syncs = 0
+        self.episodes_learned = 0
+        self.epsilon = cfg.eps_start
+        # The episode being learned from: targets y (T, K), consumed backward from ``cursor``.
+        self.episode: Episode | None = None
+        self.y_TK = np.zeros((0, self.num_heads), dtype=np.float32)
+        self.cursor = 0
+        self.stats = {"bonus_reward": float("nan"), "bonus_next": float("nan")}
+        self.stats["q_variance"] = float("nan")
+
+    # ------------------------------------------------------------------ acting
+    def act(self, obs_E: np.ndarray, global_step: int, explore: bool = True) -> np.ndarray:
+        """Epsilon-greedy on each environment's head of the episode (vote when not exploring)."""
+        n = obs_E.shape[0]
+        if not explore:
+            return self.greedy(obs_E)
+        cfg = self.cfg
+        self.epsilon = linear_schedule(cfg.eps_start, cfg.eps_end, cfg.eps_decay_steps, global_step)
+        heads_E = (
+            self.head_E if n == len(self.head_E) else self.rng.integers(0, self.num_heads, size=n)
+        )
+
+        @torch.no_grad()
+        def head_greedy() -> np.ndarray:
+            q_EKA = self.q(obs_tensor(obs_E, self.device))
+            q_EA = q_EKA.cpu()[torch.arange(n), torch.as_tensor(heads_E)]
+            return q_EA.argmax(dim=1).cpu().numpy()
+
+        return epsilon_greedy(self.rng, self.epsilon, self.num_actions, head_greedy, n)
+
+    @torch.no_grad()
+    def greedy(self, obs_E: np.ndarray) -> np.ndarray:
+        q_EKA = self.q(obs_tensor(obs_E, self.device))
+        mean_EA = q_EKA.mean(dim=1)
+        if self.cfg.ob2i.eval_policy == "mean":
+            return mean_EA.argmax(dim=1).cpu().numpy()
+        votes_EA = nn.functional.one_hot(q_EKA.argmax(dim=2), self.num_actions).sum(dim=1)
+        top_EA = votes_EA == votes_EA.max(dim=1, keepdim=True).values
+        return mean_EA.masked_fill(~top_EA, float("-inf")).argmax(dim=1).cpu().numpy()
+
+    @torch.no_grad()
+    def q_estimate(self, obs_B: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """Mean of Q(s, .) over the heads and its variance over the heads (OB2I's posterior)."""
+        q_BKA = self.q(obs_tensor(obs_B, self.device))
+        return (
+            q_BKA.mean(dim=1).cpu().numpy(),
+            q_BKA.var(dim=1, unbiased=False).cpu().numpy(),
+        )
+
+    def observe(
+        self,
+        obs_E: np.ndarray,
+        action_E: np.ndarray,
+        reward_E: np.ndarray,
+        terminated_E: np.ndarray,
+        truncated_E: np.ndarray,
+        final_obs_E: Any,
+    ) -> None:
+        self.replay.add(obs_E, action_E, reward_E, terminated_E, truncated_E, final_obs_E)
+        ended_E = np.logical_or(terminated_E, truncated_E)
+        if ended_E.any():  # a new head for each new episode
+            self.head_E[ended_E] = self.rng.integers(0, self.num_heads, size=int(ended_E.sum()))
+
+    # ------------------------------------------------------------------ learning
+    def learn(self, global_step: int) -> dict[str, torch.Tensor]:
+        metrics: dict[str, torch.Tensor] = {}
+        for _ in range(updates_due(global_step, self.cfg, self.updates)):
+            self.updates += 1  # an update with no complete episode in the replay is skipped
+            loss = self.update()
+            if loss is not None:
+                metrics["td_loss"] = loss
+        syncs = global_step // self.cfg.target_update_every
+        if syncs > self.target_syncs:
+            self.q_target.load_state_dict(self.q.state_dict())
+            self.target_syncs = syncs
+        return metrics
+
+    def _obs(self, env: int, rows: np.ndarray) -> torch.Tensor:
+        e_B = np.full(len(rows), env, dtype=np.int64)
+        return obs_tensor(self.replay.stacked_obs(e_B, rows), self.device)
+
+    @torch.no_grad()
+    def episode_targets(self, ep: Episode) -> np.ndarray:
+        """Bonuses and backward-induction targets y (T, K) of an episode (module docstring)."""
+        cfg, o = self.cfg, self.cfg.ob2i
+        length, chunk = ep.length, cfg.batch_size
+        q_next_TKA = np.empty((length, self.num_heads, self.num_actions), dtype=np.float32)
+        rb_T = np.empty(length, dtype=np.float32)
+        for lo in range(0, length, chunk):  # frames of one minibatch at a time
+            hi = min(length, lo + chunk)
+            rows = ep.start + np.arange(lo, hi, dtype=np.int64)
+            a_B = torch.as_tensor(ep.actions[lo:hi], device=self.device, dtype=torch.int64)
+            bonus_BA = ucb_bonus(self.q(self._obs(ep.env, rows)))  # online heads at (s_t, a_t)
+            rb_T[lo:hi] = bonus_BA.gather(1, a_B[:, None])[:, 0].cpu().numpy()
+            q_next_TKA[lo:hi] = self.q_target(self._obs(ep.env, rows + 1)).cpu().numpy()
+        self.stats["q_variance"] = float(np.mean(rb_T.astype(np.float64) ** 2))
+        if o.normalize_reward_bonus:
+            self.reward_bonus_rms.update(rb_T)
+            rb_T = rb_T / (float(self.reward_bonus_rms.std) + BONUS_EPS)
+        rb_T = o.bonus_reward_weight * rb_T
+        taken_next_T = np.append(ep.actions[1:], -1)  # a_{t+1}; none after the last step
+        nb_TK, keep_TK = next_state_bonus(q_next_TKA, taken_next_T)
+        if o.normalize_next_bonus:
+            self.next_bonus_rms.update(nb_TK.ravel())
+            nb_TK = nb_TK / (float(self.next_bonus_rms.std) + BONUS_EPS)
+        nb_TK = o.bonus_next_weight * nb_TK * keep_TK
+        self.stats["bonus_reward"] = float(rb_T.mean())
+        self.stats["bonus_next"] = float(nb_TK.mean())
+        return backward_targets(
+            ep.rewards + rb_T, ep.actions, q_next_TKA, nb_TK, ep.terminated, cfg.gamma, o.beta
+        )
+
+    def update(self) -> torch.Tensor | None:
+        """One gradient step on the next minibatch of the current episode (going backward)."""
+        ep = self.episode
+        if ep is None or self.cursor == 0 or not self.replay.is_live(ep.env, ep.start):
+            try:
+                ep = self.replay.sample_episode()
+            except ValueError:  # no complete episode yet
+                return None
+            self.episode, self.y_TK, self.cursor = ep, self.episode_targets(ep), ep.length
+            self.episodes_learned += 1
+        hi = self.cursor
+        lo = max(0, hi - self.cfg.batch_size)
+        rows = ep.start + np.arange(lo, hi, dtype=np.int64)
+        a_B = torch.as_tensor(ep.actions[lo:hi], device=self.device, dtype=torch.int64)
+        y_BK = torch.as_tensor(self.y_TK[lo:hi], device=self.device)
+        q_BKA = self.q(self._obs(ep.env, rows))
+        q_BK = q_BKA.gather(2, a_B[:, None, None].expand(-1, self.num_heads, 1))[:, :, 0]
+        loss = ensemble_td_loss(q_BK, y_BK, self.cfg.loss)
+        clip_and_step(loss, list(self.q.parameters()), self.opt, self.cfg.max_grad_norm)
+        self.cursor = lo
+        return loss.detach()
+
+    def diagnostics(self) -> dict[str, float]:
+        return {
+            "epsilon": self.epsilon,
+            "bonus": self.stats["bonus_reward"] + self.stats["bonus_next"],
+            "bonus_reward": self.stats["bonus_reward"],
+            "bonus_next": self.stats["bonus_next"],
+            "q_variance": self.stats["q_variance"],
+            "episodes_learned": float(self.episodes_learned),
+        }
+
+    # ------------------------------------------------------------------ checkpoints
+    def state_dict(self, include_replay: bool = True) -> dict[str, Any]:
+        ep = self.episode if include_replay else None  # its rows live in the replay
+        return {
+            "q": self.q.state_dict(),
+            "q_target": self.q_target.state_dict(),
+            "opt": self.opt.state_dict(),
+            "rng": self.rng.bit_generator.state,
+            "heads": self.head_E.copy(),
+            "rms": {
+                "next": self.next_bonus_rms.state_dict(),
+                "reward": self.reward_bonus_rms.state_dict(),
+            },
+            "counters": {
+                "updates": self.updates,
+                "target_syncs": self.target_syncs,
+                "episodes_learned": self.episodes_learned,
+                "epsilon": self.epsilon,
+                "stats": dict(self.stats),
+            },
+            "episode": None
+            if ep is None
+            else {"episode": copy.deepcopy(ep), "y": self.y_TK.copy(), "cursor": self.cursor},
+            "replay": self.replay.state_dict() if include_replay else None,
+        }
+
+    def load_state_dict(self, state: dict[str, Any]) -> None:
+        self.q.load_state_dict(state["q"])
+        self.q_target.load_state_dict(state["q_target"])
+        self.opt.load_state_dict(state["opt"])
+        self.rng.bit_generator.state = state["rng"]
+        self.head_E[...] = state["heads"]
+        self.next_bonus_rms.load_state_dict(state["rms"]["next"])
+        self.reward_bonus_rms.load_state_dict(state["rms"]["reward"])
+        c = state["counters"]
+        self.updates, self.target_syncs = c["updates"], c["target_syncs"]
+        self.episodes_learned, self.epsilon = c["episodes_learned"], c["epsilon"]
+        self.stats = dict(c["stats"])
+        self.episode, self.cursor = None, 0
+        if state.get("replay") is not None:
+            self.replay.load_state_dict(state["replay"])
+            if state.get("episode") is not None:
+                self.episode = state["episode"]["episode"]
+                self.y_TK = state["episode"]["y"]
+                self.cursor = state["episode"]["cursor"]
