@@ -51,7 +51,7 @@ def test_tiny_study_resume_and_plot_only(tmp_path: Path) -> None:
 
 
 def test_agents_are_the_library_agents() -> None:
-    assert {a.algo for a in AGENTS} <= {"ddqn", "bdqn", "farsighter"}
+    assert {a.algo for a in AGENTS} == {"ddqn", "bdqn", "ob2i", "farsighter"}
 
 
 def test_bad_maze_input_exits_2(tmp_path: Path, capsys) -> None:  # type: ignore[no-untyped-def]

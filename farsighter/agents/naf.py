@@ -29,6 +29,12 @@ action (section 4.3), so we measure its spread there: the variance of the mu-lay
 (pre-tanh) under q, sum_i phi_i^2 sigma_oi^2 + sigma_bo^2 (``BayesianLinear.output_mean_var``),
 averaged over action dimensions and over the states of the last ELBO minibatch. It is the
 continuous analogue of phi^T Cov_a phi of the discrete agent. Evaluation acts with the mean.
+
+Known limitation (benchmarks/results/learning_pendulum.json): on Pendulum-v1 naf and bnaf learn
+(3/3 seeds above -300 within 30k steps), farsighter-naf at k = 2 only in 1 of 3 seeds: with
+k-step targets the NAF curvature P collapses towards 0 while the mu-layer is trained only by the
+ELBO; the ELBO's mu gradient is proportional to P, so mu then stops learning (knaf at k = 2,
+whose mu follows the TD loss, recovers).
 """
 
 from __future__ import annotations

@@ -162,9 +162,23 @@ def _execute(
     from tqdm import tqdm
 
     total = len(jobs) * study.steps
+    if workers == 1:  # in this process, one run after the other (no interpreter start-up)
+        progress: dict[str, int] = {}
+        with tqdm(
+            total=total,
+            unit="step",
+            disable=not show_progress,
+            dynamic_ncols=True,
+            desc=f"robotics study {study.env} ({len(jobs)} runs)",
+        ) as bar:
+            for i, (label, seed, run_dir) in enumerate(jobs):
+                _run(label, study, seed, str(run_dir), progress)
+                bar.n = (i + 1) * study.steps
+                bar.refresh()
+        return
     ctx = mp.get_context("spawn")  # fresh interpreters: nothing shared by accident
     with ctx.Manager() as manager:
-        progress = manager.dict()
+        shared = manager.dict()
         bar = tqdm(
             total=total,
             unit="step",
@@ -175,7 +189,7 @@ def _execute(
         finished = 0
         with ProcessPoolExecutor(workers, mp_context=ctx) as pool:
             pending = {
-                pool.submit(_run, label, study, seed, str(run_dir), progress)
+                pool.submit(_run, label, study, seed, str(run_dir), shared)
                 for label, seed, run_dir in jobs
             }
             while pending:
@@ -183,7 +197,7 @@ def _execute(
                 for fut in done:
                     fut.result()  # re-raise a worker's error here
                     finished += study.steps
-                bar.n = finished + sum(v for v in progress.values() if v > 0)
+                bar.n = finished + sum(v for v in shared.values() if v > 0)
                 bar.refresh()
         bar.n = total
         bar.close()
@@ -379,7 +393,12 @@ def main(argv: Sequence[str]) -> int:
     parser.add_argument("--steps", type=int, default=None)
     parser.add_argument("--eval-every", type=int, default=None)
     parser.add_argument("--eval-episodes", type=int, default=None)
-    parser.add_argument("--workers", type=int, default=0, help="worker processes (0: one per core)")
+    parser.add_argument(
+        "--workers",
+        type=int,
+        default=0,
+        help="worker processes (0: one per core; 1: runs in this process)",
+    )
     parser.add_argument(
         "--agents",
         nargs="+",
