@@ -15,7 +15,6 @@ import shutil
 import time
 import warnings
 from collections.abc import Sequence
-from concurrent.futures import FIRST_COMPLETED, ProcessPoolExecutor, wait
 from dataclasses import asdict, dataclass, field
 from pathlib import Path
 from typing import Any
@@ -24,6 +23,7 @@ import numpy as np
 
 from farsighter.config import Config, make_config
 from farsighter.errors import FarsighterError
+from farsighter.studies.runner import execute
 
 ENV_ID = "farsighter/BridgeMaze-v0"
 Q_STAR = 75.0  # optimal value of the start state (tested by value iteration)
@@ -214,55 +214,22 @@ def run_study(out: Path, study: StudyConfig, show_progress: bool = True) -> Path
                 shutil.rmtree(run_dir)  # interrupted: its callback state is gone, rerun it
             jobs.append((label, seed, run_dir))
     workers = study.workers or os.cpu_count() or 1
-    total = len(study.agents) * len(study.seeds) * study.steps
-    done_before = total - len(jobs) * study.steps
+    done_before = (len(study.agents) * len(study.seeds) - len(jobs)) * study.steps
     if jobs:
-        _execute(jobs, study, workers, total, done_before, show_progress)
+        execute(
+            _run,
+            [
+                (label, seed, study.steps, study.probe_every, str(run_dir))
+                for label, seed, run_dir in jobs
+            ],
+            steps=study.steps,
+            workers=workers,
+            desc="maze study",
+            show_progress=show_progress,
+            done_before=done_before,
+        )
     write_outputs(out)
     return out
-
-
-def _execute(
-    jobs: list[tuple[str, int, Path]],
-    study: StudyConfig,
-    workers: int,
-    total: int,
-    done_before: int,
-    show_progress: bool,
-) -> None:
-    import multiprocessing as mp
-
-    from tqdm import tqdm
-
-    ctx = mp.get_context("spawn")  # fresh interpreters: nothing shared by accident
-    with ctx.Manager() as manager:
-        progress = manager.dict()
-        bar = tqdm(
-            total=total,
-            initial=done_before,
-            unit="step",
-            disable=not show_progress,
-            desc=f"maze study ({len(jobs)} runs, {workers} workers)",
-            dynamic_ncols=True,
-        )
-        finished_steps = 0
-        with ProcessPoolExecutor(workers, mp_context=ctx) as pool:
-            pending = {
-                pool.submit(
-                    _run, label, seed, study.steps, study.probe_every, str(run_dir), progress
-                )
-                for label, seed, run_dir in jobs
-            }
-            while pending:
-                done, pending = wait(pending, timeout=1.0, return_when=FIRST_COMPLETED)
-                for fut in done:
-                    fut.result()  # re-raise a worker's error here
-                    finished_steps += study.steps
-                running = sum(v for v in progress.values() if v > 0)
-                bar.n = done_before + finished_steps + running
-                bar.refresh()
-        bar.n = total
-        bar.close()
 
 
 # ------------------------------------------------------------------------------------------------

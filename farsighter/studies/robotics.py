@@ -16,7 +16,6 @@ import os
 import shutil
 import time
 from collections.abc import Sequence
-from concurrent.futures import FIRST_COMPLETED, ProcessPoolExecutor, wait
 from dataclasses import asdict, dataclass
 from pathlib import Path
 from typing import Any
@@ -26,6 +25,7 @@ import numpy as np
 from farsighter.config import Config, make_config
 from farsighter.errors import FarsighterError
 from farsighter.studies.maze import slug
+from farsighter.studies.runner import execute
 
 
 @dataclass(frozen=True)
@@ -149,58 +149,16 @@ def run_study(out: Path, study: StudyConfig, show_progress: bool = True) -> Path
                 shutil.rmtree(run_dir)
             jobs.append((label, seed, run_dir))
     if jobs:
-        _execute(jobs, study, study.workers or os.cpu_count() or 1, show_progress)
+        execute(
+            _run,
+            [(label, study, seed, str(run_dir)) for label, seed, run_dir in jobs],
+            steps=study.steps,
+            workers=study.workers or os.cpu_count() or 1,
+            desc=f"robotics study {study.env}",
+            show_progress=show_progress,
+        )
     write_outputs(out)
     return out
-
-
-def _execute(
-    jobs: list[tuple[str, int, Path]], study: StudyConfig, workers: int, show_progress: bool
-) -> None:
-    import multiprocessing as mp
-
-    from tqdm import tqdm
-
-    total = len(jobs) * study.steps
-    if workers == 1:  # in this process, one run after the other (no interpreter start-up)
-        progress: dict[str, int] = {}
-        with tqdm(
-            total=total,
-            unit="step",
-            disable=not show_progress,
-            dynamic_ncols=True,
-            desc=f"robotics study {study.env} ({len(jobs)} runs)",
-        ) as bar:
-            for i, (label, seed, run_dir) in enumerate(jobs):
-                _run(label, study, seed, str(run_dir), progress)
-                bar.n = (i + 1) * study.steps
-                bar.refresh()
-        return
-    ctx = mp.get_context("spawn")  # fresh interpreters: nothing shared by accident
-    with ctx.Manager() as manager:
-        shared = manager.dict()
-        bar = tqdm(
-            total=total,
-            unit="step",
-            disable=not show_progress,
-            dynamic_ncols=True,
-            desc=f"robotics study {study.env} ({len(jobs)} runs, {workers} workers)",
-        )
-        finished = 0
-        with ProcessPoolExecutor(workers, mp_context=ctx) as pool:
-            pending = {
-                pool.submit(_run, label, study, seed, str(run_dir), shared)
-                for label, seed, run_dir in jobs
-            }
-            while pending:
-                done, pending = wait(pending, timeout=1.0, return_when=FIRST_COMPLETED)
-                for fut in done:
-                    fut.result()  # re-raise a worker's error here
-                    finished += study.steps
-                bar.n = finished + sum(v for v in shared.values() if v > 0)
-                bar.refresh()
-        bar.n = total
-        bar.close()
 
 
 # ------------------------------------------------------------------------------------------------
