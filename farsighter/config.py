@@ -125,9 +125,13 @@ class NAFConfig:
     """Mean reversion of the OU process x += -theta x + sigma N(0, 1) (Lillicrap et al. 2016)."""
     mu_penalty: float = 0.0
     """L2 penalty on the mu-layer's pre-tanh output (mean weights), added to naf/knaf's TD loss
-    and to the Bayesian agents' ELBO (0: off). Deep in tanh's saturation mu gets no gradient and
-    weight draws no longer move the action; SAC's code regularises its pre-tanh mean with 1e-3
-    (Haarnoja et al. 2018). It did not rescue farsighter-naf on Pendulum (our runs)."""
+    and to the Bayesian agents' ELBO (0: off; bnaf and farsighter-naf default to 0.01). Deep in
+    tanh's saturation mu gets no gradient and weight draws no longer move the action, so a
+    Bayesian agent stops exploring; on Pendulum-v1 farsighter-naf then saturated (|pre-tanh|
+    ~ 20), NAF's P fell to its floor and the policy never recovered in 2 of 3 seeds; at 0.01 all
+    seeds learned (benchmarks/results/learning_pendulum.json). SAC's code regularises its
+    pre-tanh mean with 1e-3 (Haarnoja et al. 2018). naf/knaf explore with additive action noise,
+    which saturation does not silence."""
     prior_std: float = 0.1
     """Prior N(0, prior_std^2) on every mu-layer weight; Table 1's prior sigma = 0.1."""
     init_sigma: float = 0.002
@@ -492,10 +496,12 @@ ALGO_DEFAULTS: dict[str, dict[str, Any]] = {
     # Multi-step NAF (section 5.2 baselines): k-step returns; k = 5 as D4PG's n-step returns
     # (Barth-Maron et al. 2018), the paper gives no k for continuous control.
     "knaf": {"k": 5, "loss": "mse"},
-    # Bayesian NAF (section 4.3, Algorithm 3): mu-layer weights sampled per step, 1-step.
-    "bnaf": {"k": 1, "loss": "mse"},
+    # Bayesian NAF (section 4.3, Algorithm 3): mu-layer weights sampled per step, 1-step. The
+    # Bayesian agents explore only through the mu-layer's weight draws, which tanh saturation
+    # silences, so they keep its pre-tanh output small (NAFConfig.mu_penalty; our tuning).
+    "bnaf": {"k": 1, "loss": "mse", "naf.mu_penalty": 0.01},
     # Farsighter-NAF (sections 4.3-4.4): weights re-drawn every step over k steps; same k as knaf.
-    "farsighter-naf": {"k": 5, "loss": "mse"},
+    "farsighter-naf": {"k": 5, "loss": "mse", "naf.mu_penalty": 0.01},
 }
 
 NAF_ALGORITHMS: tuple[str, ...] = ("naf", "knaf", "bnaf", "farsighter-naf")

@@ -30,11 +30,14 @@ action (section 4.3), so we measure its spread there: the variance of the mu-lay
 averaged over action dimensions and over the states of the last ELBO minibatch. It is the
 continuous analogue of phi^T Cov_a phi of the discrete agent. Evaluation acts with the mean.
 
-Known limitation (benchmarks/results/learning_pendulum.json): on Pendulum-v1 naf and bnaf learn
-(3/3 seeds above -300 within 30k steps), farsighter-naf at k = 2 only in 1 of 3 seeds: with
-k-step targets the NAF curvature P collapses towards 0 while the mu-layer is trained only by the
-ELBO; the ELBO's mu gradient is proportional to P, so mu then stops learning (knaf at k = 2,
-whose mu follows the TD loss, recovers).
+Keeping mu out of tanh's saturation matters for the Bayesian agents (benchmarks/results/
+learning_pendulum.json): they explore only through weight draws of the mu-layer, and once its
+pre-tanh output is large the draws no longer move the action, the stored actions all sit at mu,
+NAF's curvature P is no longer identified and falls to its floor, and the ELBO's mu gradient
+(proportional to P) vanishes with it. On Pendulum-v1 this took farsighter-naf (k = 2) in 2 of 3
+seeds; the pre-tanh penalty ``naf.mu_penalty`` (0.01 by default for bnaf and farsighter-naf)
+and the soft bounds on L's diagonal (:func:`farsighter.ops.naf.soft_clamp`; the former hard
+clamp left P stuck at its floor once crossed) fixed it.
 """
 
 from __future__ import annotations

@@ -26,19 +26,37 @@ __all__ = [
     "lower_triangular",
     "num_tril_entries",
     "scale_action",
+    "soft_clamp",
     "unscale_action",
 ]
 
 # Bounds on the pre-exponential diagonal of L. exp(5) = 148 caps the curvature of the
-# advantage from the diagonal at P_ii <= exp(10) ~ 2.2e4 (no overflow of A or its gradient),
-# and exp(-5) keeps P clearly positive definite in float32. The clamp is a hard clamp:
-# an entry outside the range gets no gradient. Pass ``None`` to disable it.
+# advantage from the diagonal at P_ii <= exp(10) ~ 2.2e4 (exp(12) at most with the soft
+# shoulder; no overflow of A or its gradient), and exp(-5) keeps P clearly positive definite in
+# float32 (exp(-12) at the very least). The bounds are SOFT
+# (:func:`soft_clamp`): a hard clamp gives an entry outside the range no gradient at all, and
+# on Pendulum-v1 a single large step that pushed every state's diagonal below the floor left P
+# stuck at exp(-10) for the rest of the run (farsighter-naf, our runs). Pass ``None`` to disable.
 DEFAULT_LOG_DIAG_BOUNDS: tuple[float, float] = (-5.0, 5.0)
 
 
 def num_tril_entries(action_dim: int) -> int:
     """Number of free entries of an A x A lower-triangular matrix: A (A + 1) / 2."""
     return action_dim * (action_dim + 1) // 2
+
+
+def soft_clamp(x: Tensor, low: float, high: float, margin: float = 1.0) -> Tensor:
+    """The identity on [low, high], with soft shoulders outside that never lose the gradient.
+
+    Outside the range the value is ``low - margin * tanh((low - x) / margin)`` (below) or
+    ``high + margin * tanh((x - high) / margin)`` (above): continuous with slope 1 at the
+    bounds, bounded in (low - margin, high + margin), and its gradient sech^2(d / margin) at a
+    distance d past a bound decays but is never exactly 0 in the range that matters (unlike a
+    hard clamp, which gives an entry past the bound no gradient at all).
+    """
+    below = low - margin * torch.tanh((low - x) / margin)
+    above = high + margin * torch.tanh((x - high) / margin)
+    return torch.where(x < low, below, torch.where(x > high, above, x))
 
 
 def lower_triangular(
@@ -50,15 +68,15 @@ def lower_triangular(
 
     The entries fill the lower triangle in row-major order, i.e. the order of
     ``torch.tril_indices(A, A)``: (0,0), (1,0), (1,1), (2,0), (2,1), (2,2), ... The diagonal
-    entries are exponentiated ("the diagonal terms are exponentiated", Sec. 3.3) after a clamp
-    to ``log_diag_bounds`` for numerical safety (see :data:`DEFAULT_LOG_DIAG_BOUNDS`); the
+    entries are exponentiated ("the diagonal terms are exponentiated", Sec. 3.3) after a soft
+    clamp to ``log_diag_bounds`` for numerical safety (see :data:`DEFAULT_LOG_DIAG_BOUNDS`); the
     off-diagonal entries are used as they are. Diagonal and off-diagonal entries are written
     separately, so no exp is ever taken of an off-diagonal value (no inf/NaN gradients).
 
     Args:
         entries_BM: tensor of shape (..., M).
         action_dim: A.
-        log_diag_bounds: (low, high) clamp of the diagonal before exp, or None for no clamp.
+        log_diag_bounds: (low, high) soft clamp of the diagonal before exp, or None for none.
 
     Returns:
         L of shape (..., A, A), zero above the diagonal, strictly positive diagonal.
@@ -75,7 +93,7 @@ def lower_triangular(
 
     log_diag_BA = entries_BM[..., diag_pos_A]
     if log_diag_bounds is not None:
-        log_diag_BA = log_diag_BA.clamp(log_diag_bounds[0], log_diag_bounds[1])
+        log_diag_BA = soft_clamp(log_diag_BA, log_diag_bounds[0], log_diag_bounds[1])
 
     l_BAA = entries_BM.new_zeros(*entries_BM.shape[:-1], action_dim, action_dim)
     l_BAA[..., rows_M[off_pos], cols_M[off_pos]] = entries_BM[..., off_pos]
