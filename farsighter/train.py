@@ -284,8 +284,11 @@ def train(cfg: Config, callbacks: Sequence[Callback] = ()) -> dict[str, Any]:
                 if success is not None:  # goal-conditioned tasks: success.csv, not metrics.csv
                     state.recent_successes.append(success)
                     logger.success(
-                        {"global_step": state.global_step, "episode": state.episodes,
-                         "success": success}
+                        {
+                            "global_step": state.global_step,
+                            "episode": state.episodes,
+                            "success": success,
+                        }
                     )
                     logger.scalar(
                         "charts/success_rate",

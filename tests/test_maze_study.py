@@ -7,7 +7,7 @@ import os
 from pathlib import Path
 
 from farsighter.cli import main
-from farsighter.studies.maze import AGENTS
+from farsighter.studies.maze import AGENTS, DEFAULT_AGENTS, StudyConfig, _agent_labels
 
 
 def test_tiny_study_resume_and_plot_only(tmp_path: Path) -> None:
@@ -51,7 +51,13 @@ def test_tiny_study_resume_and_plot_only(tmp_path: Path) -> None:
 
 
 def test_agents_are_the_library_agents() -> None:
-    assert {a.algo for a in AGENTS} == {"ddqn", "bdqn", "ob2i", "farsighter"}
+    assert {a.algo for a in AGENTS} == {"ddqn", "bdqn", "ob2i", "farsighter", "rnd", "krnd"}
+    labels = [a.label for a in AGENTS]
+    # the default study is Fig. 1's five agents; 'all' adds the novelty-bonus baselines
+    assert StudyConfig().agents == DEFAULT_AGENTS and set(DEFAULT_AGENTS) < set(labels)
+    assert "RND" not in DEFAULT_AGENTS
+    assert _agent_labels(["all"]) == tuple(labels)
+    assert _agent_labels(["RND", "DDQN"]) == ("RND", "DDQN")
 
 
 def test_bad_maze_input_exits_2(tmp_path: Path, capsys) -> None:  # type: ignore[no-untyped-def]

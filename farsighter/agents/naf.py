@@ -35,7 +35,7 @@ learning_pendulum.json): they explore only through weight draws of the mu-layer,
 pre-tanh output is large the draws no longer move the action, the stored actions all sit at mu,
 NAF's curvature P is no longer identified and falls to its floor, and the ELBO's mu gradient
 (proportional to P) vanishes with it. On Pendulum-v1 this took farsighter-naf (k = 2) in 2 of 3
-seeds; the pre-tanh penalty ``naf.mu_penalty`` (0.01 by default for bnaf and farsighter-naf)
+seeds; the pre-tanh penalty ``naf.mu_penalty`` (0.1 by default for bnaf and farsighter-naf)
 and the soft bounds on L's diagonal (:func:`farsighter.ops.naf.soft_clamp`; the former hard
 clamp left P stuck at its floor once crossed) fixed it.
 """
