@@ -699,7 +699,9 @@ def _write_report(rows: list[dict[str, Any]], study: dict[str, Any], out: Path) 
         "",
         "Q(start) is the greedy value at the start state under the final Q (posterior mean for "
         "BDQN/Farsighter); *posterior var* is phi^T Cov phi there. Success: training episodes "
-        "that reached the apple in the last quarter of training.",
+        "that reached the apple in the last quarter of training. With gamma = 1 a time-limit "
+        "truncation bootstraps, so the value of never reaching the apple is unbounded below: an "
+        "agent that has not found it can estimate Q(start) far below -200.",
         "",
         _markdown_table(rows),
         "## The paper's claims, checked",
