@@ -12,7 +12,6 @@ import csv
 import json
 import os
 import shutil
-import time
 import warnings
 from collections.abc import Sequence
 from dataclasses import asdict, dataclass, field
@@ -23,7 +22,7 @@ import numpy as np
 
 from farsighter.config import Config, make_config
 from farsighter.errors import FarsighterError
-from farsighter.studies.runner import execute
+from farsighter.studies.runner import add_study_arguments, execute, redraw, run_and_report
 
 ENV_ID = "farsighter/BridgeMaze-v0"
 Q_STAR = 75.0  # optimal value of the start state (tested by value iteration)
@@ -748,40 +747,16 @@ def main(argv: Sequence[str]) -> int:
     parser = argparse.ArgumentParser(
         prog="farsighter maze", description="The bridge-maze study of section 5.1."
     )
-    parser.add_argument(
-        "--quick",
-        action="store_true",
-        help=f"{len(QUICK.seeds)} seeds x {QUICK.steps:,} steps (about 2 minutes)",
-    )
-    parser.add_argument(
-        "--out", default=None, help="study directory (default studies/maze[-quick])"
-    )
-    parser.add_argument("--seeds", type=int, nargs="+", default=None)
-    parser.add_argument("--steps", type=int, default=None)
-    parser.add_argument("--workers", type=int, default=0, help="worker processes (0: one per core)")
-    parser.add_argument(
-        "--agents",
-        nargs="+",
-        default=None,
-        help="agents by label, or 'all' (default: the five of Fig. 1); labels: "
+    add_study_arguments(
+        parser,
+        quick_help=f"{len(QUICK.seeds)} seeds x {QUICK.steps:,} steps (about 2 minutes)",
+        out_help="study directory (default studies/maze[-quick])",
+        agents_help="agents by label, or 'all' (default: the five of Fig. 1); labels: "
         + ", ".join(repr(a.label) for a in AGENTS),
     )
-    parser.add_argument(
-        "--plot-only",
-        metavar="DIR",
-        default=None,
-        help="redraw figures, table and report of an existing study",
-    )
-    parser.add_argument("--overwrite", action="store_true", help="delete --out first")
-    parser.add_argument("--no-progress", action="store_true")
     args = parser.parse_args(list(argv))
     if args.plot_only:
-        path = Path(args.plot_only)
-        if not (path / "study.json").exists():
-            raise FarsighterError(f"{path} holds no maze study (no study.json)")
-        write_outputs(path)
-        print(f"report: {path / 'report.md'}")
-        return 0
+        return redraw(Path(args.plot_only), "maze", write_outputs)
     base = QUICK if args.quick else StudyConfig()
     study = StudyConfig(
         seeds=tuple(args.seeds) if args.seeds else base.seeds,
@@ -793,11 +768,6 @@ def main(argv: Sequence[str]) -> int:
     if study.steps < 2 * study.probe_every:
         raise FarsighterError(f"--steps must be >= {2 * study.probe_every} (got {study.steps})")
     out = Path(args.out or ("studies/maze-quick" if args.quick else "studies/maze"))
-    if args.overwrite and out.exists():
-        shutil.rmtree(out)
-    t0 = time.perf_counter()
-    run_study(out, study, show_progress=not args.no_progress)
-    print(f"maze study done in {time.perf_counter() - t0:.0f} s")
-    print(f"report: {out / 'report.md'}")
-    print(f"figures: {out / 'figures'}")
-    return 0
+    return run_and_report(
+        out, args.overwrite, "maze", lambda: run_study(out, study, not args.no_progress)
+    )

@@ -14,7 +14,6 @@ import csv
 import json
 import os
 import shutil
-import time
 from collections.abc import Sequence
 from dataclasses import asdict, dataclass
 from pathlib import Path
@@ -25,7 +24,7 @@ import numpy as np
 from farsighter.config import Config, make_config
 from farsighter.errors import FarsighterError
 from farsighter.studies.maze import slug
-from farsighter.studies.runner import execute
+from farsighter.studies.runner import add_study_arguments, execute, redraw, run_and_report
 
 
 @dataclass(frozen=True)
@@ -341,44 +340,17 @@ def main(argv: Sequence[str]) -> int:
         help="Walker2d-v5 (default), FetchPickAndPlace-v4, "
         "HandManipulateBlock-v1 or any continuous Gymnasium id",
     )
-    parser.add_argument(
-        "--quick", action="store_true", help=f"{len(QUICK.seeds)} seeds x {QUICK.steps:,} steps"
+    add_study_arguments(
+        parser,
+        quick_help=f"{len(QUICK.seeds)} seeds x {QUICK.steps:,} steps",
+        out_help="study directory (default studies/robotics-ENV)",
+        agents_help=f"subset of: {', '.join(repr(a.label) for a in AGENTS)}",
     )
-    parser.add_argument(
-        "--out", default=None, help="study directory (default studies/robotics-ENV)"
-    )
-    parser.add_argument("--seeds", type=int, nargs="+", default=None)
-    parser.add_argument("--steps", type=int, default=None)
     parser.add_argument("--eval-every", type=int, default=None)
     parser.add_argument("--eval-episodes", type=int, default=None)
-    parser.add_argument(
-        "--workers",
-        type=int,
-        default=0,
-        help="worker processes (0: one per core; 1: runs in this process)",
-    )
-    parser.add_argument(
-        "--agents",
-        nargs="+",
-        default=None,
-        help=f"subset of: {', '.join(repr(a.label) for a in AGENTS)}",
-    )
-    parser.add_argument(
-        "--plot-only",
-        metavar="DIR",
-        default=None,
-        help="redraw figure, table and report of an existing study",
-    )
-    parser.add_argument("--overwrite", action="store_true", help="delete --out first")
-    parser.add_argument("--no-progress", action="store_true")
     args = parser.parse_args(list(argv))
     if args.plot_only:
-        path = Path(args.plot_only)
-        if not (path / "study.json").exists():
-            raise FarsighterError(f"{path} holds no robotics study (no study.json)")
-        write_outputs(path)
-        print(f"report: {path / 'report.md'}")
-        return 0
+        return redraw(Path(args.plot_only), "robotics", write_outputs)
     base = QUICK if args.quick else StudyConfig()
     study = StudyConfig(
         env=args.env or base.env,
@@ -398,11 +370,6 @@ def main(argv: Sequence[str]) -> int:
             raise FarsighterError(f"--{name} must be >= 1 (got {value})")
     default_out = "studies/robotics-" + slug(study.env) + ("-quick" if args.quick else "")
     out = Path(args.out or default_out)
-    if args.overwrite and out.exists():
-        shutil.rmtree(out)
-    t0 = time.perf_counter()
-    run_study(out, study, show_progress=not args.no_progress)
-    print(f"robotics study done in {time.perf_counter() - t0:.0f} s")
-    print(f"report: {out / 'report.md'}")
-    print(f"figures: {out / 'figures'}")
-    return 0
+    return run_and_report(
+        out, args.overwrite, "robotics", lambda: run_study(out, study, not args.no_progress)
+    )

@@ -2,9 +2,61 @@
 
 from __future__ import annotations
 
+import argparse
+import shutil
+import time
 from collections.abc import Callable, Sequence
 from concurrent.futures import FIRST_COMPLETED, ProcessPoolExecutor, wait
+from pathlib import Path
 from typing import Any
+
+from farsighter.errors import FarsighterError
+
+
+def add_study_arguments(
+    parser: argparse.ArgumentParser, *, quick_help: str, out_help: str, agents_help: str
+) -> None:
+    """The arguments every study command shares (the study adds its own)."""
+    parser.add_argument("--quick", action="store_true", help=quick_help)
+    parser.add_argument("--out", default=None, help=out_help)
+    parser.add_argument("--seeds", type=int, nargs="+", default=None)
+    parser.add_argument("--steps", type=int, default=None)
+    parser.add_argument(
+        "--workers",
+        type=int,
+        default=0,
+        help="worker processes (0: one per core; 1: runs in this process)",
+    )
+    parser.add_argument("--agents", nargs="+", default=None, help=agents_help)
+    parser.add_argument(
+        "--plot-only",
+        metavar="DIR",
+        default=None,
+        help="redraw figures, table and report of an existing study",
+    )
+    parser.add_argument("--overwrite", action="store_true", help="delete --out first")
+    parser.add_argument("--no-progress", action="store_true")
+
+
+def redraw(path: Path, kind: str, write_outputs: Callable[[Path], None]) -> int:
+    """--plot-only: figures, table and report again from a study directory's saved files."""
+    if not (path / "study.json").exists():
+        raise FarsighterError(f"{path} holds no {kind} study (no study.json)")
+    write_outputs(path)
+    print(f"report: {path / 'report.md'}")
+    return 0
+
+
+def run_and_report(out: Path, overwrite: bool, kind: str, run: Callable[[], object]) -> int:
+    """Delete ``out`` first if asked, run the study, say where its outputs are."""
+    if overwrite and out.exists():
+        shutil.rmtree(out)
+    t0 = time.perf_counter()
+    run()
+    print(f"{kind} study done in {time.perf_counter() - t0:.0f} s")
+    print(f"report: {out / 'report.md'}")
+    print(f"figures: {out / 'figures'}")
+    return 0
 
 
 def execute(
