@@ -7,7 +7,7 @@ import os
 from pathlib import Path
 
 from farsighter.cli import main
-from farsighter.studies.robotics import AGENTS, PAPER_TABLE3
+from farsighter.studies.robotics import AGENTS, PAPER_TABLE3, _claims
 
 
 def test_tiny_walker_study_resume_and_plot_only(tmp_path: Path) -> None:
@@ -91,3 +91,15 @@ def test_bad_input_exits_2(tmp_path: Path, capsys) -> None:  # type: ignore[no-u
     assert main(["robotics", "--agents", "Nope", "--out", str(tmp_path / "x")]) == 2
     assert main(["robotics", "--env", "NoSuchEnv-v0", "--out", str(tmp_path / "y")]) == 2
     assert not (tmp_path / "y").exists()
+
+
+def test_claims_call_a_tie_undecided() -> None:
+    tied = {"NAF": 0.05, "Bayesian NAF": 0.05, "Farsighter": 0.05}
+    lines = _claims(tied, "success rate")
+    assert all("not decided" in line for line in lines) and len(lines) == 2
+    assert not any("does NOT hold" in line or "holds in this run" in line for line in lines)
+    ahead = _claims({"NAF": 100.0, "Bayesian NAF": 200.0, "Farsighter": 300.0}, "return")
+    assert "**Farsighter**" in ahead[0] and "holds in this run" in ahead[0]
+    assert ahead[1].endswith("holds in this run.")
+    behind = _claims({"NAF": 300.0, "Bayesian NAF": 200.0, "Farsighter": 100.0}, "return")
+    assert "does NOT hold" in behind[0] and "does NOT hold" in behind[1]

@@ -281,10 +281,45 @@ def _markdown_table(rows: list[dict[str, Any]], goal: bool) -> str:
     return "\n".join(lines) + "\n"
 
 
+def _claims(by: dict[str, float], measure: str) -> list[str]:
+    """The paper's claims as report lines; a tie is "not decided", not a failure."""
+    claims: list[str] = []
+    top = max(by.values())
+    leaders = [a for a, v in by.items() if v == top]
+    if len(leaders) > 1:
+        claims.append(
+            f"- Best agent by final {measure} (paper: Farsighter): {', '.join(leaders)} tie at "
+            f"{top:.3g}: not decided in this run."
+        )
+    else:
+        claims.append(
+            f"- Best agent by final {measure}: **{leaders[0]}** (paper: Farsighter). "
+            + (
+                "This holds in this run."
+                if leaders[0] == "Farsighter"
+                else "This does NOT hold here."
+            )
+        )
+    if "Farsighter" in by and "Bayesian NAF" in by:
+        f, b = by["Farsighter"], by["Bayesian NAF"]
+        verdict = (
+            "a tie: not decided in this run."
+            if f == b
+            else "holds in this run."
+            if f > b
+            else "does NOT hold in this run."
+        )
+        claims.append(
+            "- Multi-step uncertainty (Farsighter) beats one-step (Bayesian NAF): "
+            f"{f:.3g} vs {b:.3g}: {verdict}"
+        )
+    return claims
+
+
 def _write_report(study: dict[str, Any], rows: list[dict[str, Any]], goal: bool, out: Path) -> None:
     key = "final_success_mean" if goal else "final_return_mean"
     by = {r["agent"]: r[key] for r in rows}
-    best = max(by, key=lambda a: by[a])
+    measure = "success rate" if goal else "return"
     lines = [
         f"# Robotics study: {study['env']} (paper section 5.2, Figure 3, Table 3)",
         "",
@@ -294,6 +329,16 @@ def _write_report(study: dict[str, Any], rows: list[dict[str, Any]], goal: bool,
         "posterior-mean weights). Shared settings: the `continuous` preset "
         "(`farsighter presets`).",
         "",
+    ]
+    if goal:
+        lines += [
+            "Budget: the paper's Figure 3 trains the robotic tasks far longer (\"around 100 "
+            'million steps" for FetchPickAndPlace to reach an almost 100% success rate). Well '
+            "below that, success rates at the chance level (episodes whose goal starts where "
+            "the object already is) are what to expect; compare budgets before results.",
+            "",
+        ]
+    lines += [
         "## Table",
         "",
         "Final evaluation (mean ± std over seeds of each seed's mean evaluation "
@@ -304,17 +349,8 @@ def _write_report(study: dict[str, Any], rows: list[dict[str, Any]], goal: bool,
         _markdown_table(rows, goal),
         "## Claims",
         "",
-        f"- Best agent here by final {'success rate' if goal else 'return'}: **{best}** "
-        f"(paper: Farsighter). "
-        + ("This holds in this run." if best == "Farsighter" else "This does NOT hold here."),
     ]
-    if "Farsighter" in by and "Bayesian NAF" in by:
-        ok = by["Farsighter"] > by["Bayesian NAF"]
-        lines.append(
-            "- Multi-step uncertainty (Farsighter) beats one-step (Bayesian NAF): "
-            f"{by['Farsighter']:.3g} vs {by['Bayesian NAF']:.3g}: "
-            + ("holds in this run." if ok else "does NOT hold in this run.")
-        )
+    lines += _claims(by, measure)
     lines += [
         "",
         "## Figure",
