@@ -23,6 +23,9 @@ def machine() -> dict[str, Any]:
         "cuda": torch.cuda.get_device_name(0) if torch.cuda.is_available() else None,
         "python": platform.python_version(),
         "platform": platform.platform(),
+        # other work on the machine when the result was written (1, 5, 15 min); figures taken
+        # with a load above the core count are lower bounds
+        "load_average": [round(x, 2) for x in os.getloadavg()],
     }
 
 

@@ -62,8 +62,8 @@ def main() -> None:
             "steps": args.steps,
             "learning_starts": args.learning_starts,
             "preset": "continuous",
-            "note": "steps/s after learning_starts, final evaluation excluded; CPU shared with "
-            "other jobs on a 2-core machine, so figures are lower bounds",
+            "note": "steps/s after learning_starts, final evaluation excluded, one torch thread; "
+            "machine.load_average says what else ran",
             "results": results,
         },
     )
