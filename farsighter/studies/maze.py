@@ -389,7 +389,9 @@ def _plot_learning_curves(runs: dict[str, list[dict[str, Any]]], steps: int, fil
                 if len(r["metrics"])
             ]
         )
-        mean, std = np.nanmean(curves, axis=0), np.nanstd(curves, axis=0)
+        with warnings.catch_warnings():  # a bin with no finished episode in any seed is NaN
+            warnings.simplefilter("ignore", RuntimeWarning)
+            mean, std = np.nanmean(curves, axis=0), np.nanstd(curves, axis=0)
         c = COLORS.get(label)
         ax.plot(centers, mean, label=label, color=c)
         ax.fill_between(centers, mean - std, mean + std, alpha=0.15, color=c)
@@ -461,8 +463,7 @@ def _plot_heatmaps(runs: dict[str, list[dict[str, Any]]], file: Path) -> None:
     for ax, label in zip(axes, labels, strict=True):
         visits = np.sum([r["visits"] for r in runs[label]], axis=0).astype(float)
         shown = np.ma.masked_array(np.log10(visits + 1), mask=wall)
-        cmap = plt.get_cmap("viridis").copy()
-        cmap.set_bad("black")
+        cmap = plt.get_cmap("viridis").with_extremes(bad="black")
         im = ax.imshow(shown, cmap=cmap, origin="upper")
         for r, c in maze.bridge_cells:  # type: ignore[attr-defined]
             ax.add_patch(plt.Rectangle((c - 0.5, r - 0.5), 1, 1, fill=False, ec="white", lw=1.5))
