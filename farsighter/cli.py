@@ -116,12 +116,16 @@ def cmd_plot(argv: Sequence[str]) -> int:
 
 
 def cmd_presets(argv: Sequence[str]) -> int:
-    from farsighter.config import PRESETS
+    from farsighter.config import ALGO_PINNED, PRESETS
 
     for p in PRESETS.values():
         print(f"{p.name}: {p.doc}\n  source: {p.source}")
         for key, value in p.values.items():
             print(f"    {key} = {value!r}")
+    print("applied after any preset (algorithm-defining; your flags still override them):")
+    for algo, values in ALGO_PINNED.items():
+        for key, value in values.items():
+            print(f"    {algo}: {key} = {value!r}")
     return 0
 
 

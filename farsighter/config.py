@@ -169,7 +169,7 @@ class OB2IConfig:
     """OB2I (Bai et al. 2021): bootstrapped Q-heads, UCB-bonus, episodic backward update.
 
     Defaults are the authors' code (Baichenjia/OB2I, ``run_atari.py --ebu --reward-type ucb``) as
-    recorded in SPEC section 2.3; the epsilon schedule 1.0 -> 0.1 is ALGO_DEFAULTS["ob2i"].
+    recorded in SPEC section 2.3; the epsilon schedule 1.0 -> 0.1 is ALGO_PINNED["ob2i"].
     """
 
     num_heads: int = 10
@@ -488,9 +488,8 @@ ALGO_DEFAULTS: dict[str, dict[str, Any]] = {
     # Farsighter: fresh draw every step (Algorithm 2), k-step returns, minibatches from the latest
     # N transitions (Algorithm 1 line 4). k = 10 is the smallest k of Figure 4.
     "farsighter": {"k": 10, "blr.redraw": "step", "sample_recent": True},
-    # OB2I: epsilon annealed 1.0 -> 0.1 around the head drawn per episode (authors' code:
-    # --exploration-final-eps 0.1, SPEC 2.3). A preset that sets eps_end takes precedence.
-    "ob2i": {"eps_end": 0.1},
+    # OB2I: epsilon annealed 1.0 -> 0.1 around the head drawn per episode (ALGO_PINNED).
+    "ob2i": {},
     # RND on DDQN, 1-step; k-step RND (TD(K)+RND of appendix 9.1.1) with k = 3 as for kddqn.
     "rnd": {},
     "krnd": {"k": 3},
@@ -506,6 +505,14 @@ ALGO_DEFAULTS: dict[str, dict[str, Any]] = {
     "bnaf": {"k": 1, "loss": "mse", "naf.mu_penalty": 0.1},
     # Farsighter-NAF (sections 4.3-4.4): weights re-drawn every step over k steps; same k as knaf.
     "farsighter-naf": {"k": 5, "loss": "mse", "naf.mu_penalty": 0.1},
+}
+
+# Values that define an algorithm: applied after the preset (a preset's generic schedule does not
+# replace them), before the user's flags (which still do).
+ALGO_PINNED: dict[str, dict[str, Any]] = {
+    # OB2I anneals epsilon from 1.0 to 0.1 (authors' code: --exploration-final-eps 0.1, SPEC 2.3);
+    # the atari and cartpole presets' 0.01 / 0.02 are for epsilon-greedy DQN.
+    "ob2i": {"eps_end": 0.1},
 }
 
 NAF_ALGORITHMS: tuple[str, ...] = ("naf", "knaf", "bnaf", "farsighter-naf")
@@ -550,7 +557,8 @@ def resolve_preset_name(preset: str, env: str, algo: str = "") -> str:
 def make_config(
     algo: str = "ddqn", env: str = "CartPole-v1", preset: str = "auto", **overrides: Any
 ) -> Config:
-    """Build a config: field defaults <- algorithm defaults <- preset <- ``overrides``.
+    """Build a config: field defaults <- algorithm defaults <- preset <- the algorithm's pinned
+    values (:data:`ALGO_PINNED`) <- ``overrides``.
 
     ``overrides`` use field names; nested fields are written ``blr__prior_std`` or passed in a
     dict as ``{"blr.prior_std": ...}`` via ``**{"blr.prior_std": 0.1}``.
@@ -561,6 +569,7 @@ def make_config(
     values: dict[str, Any] = {}
     values.update(ALGO_DEFAULTS[algo])
     values.update(PRESETS[name].values)
+    values.update(ALGO_PINNED.get(algo, {}))
     values.update({k.replace("__", "."): v for k, v in overrides.items()})
     values.update({"algo": algo, "env": env, "preset": name})
     return _nested_replace(Config(), values)

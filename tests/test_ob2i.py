@@ -184,6 +184,11 @@ def test_config_defaults_and_validation(tmp_path: Path) -> None:
     assert cfg.ob2i.num_heads == 10 and cfg.ob2i.beta == 0.5
     assert cfg.ob2i.bonus_reward_weight == cfg.ob2i.bonus_next_weight == 5e-5
     assert (cfg.eps_start, cfg.eps_end) == (1.0, 0.1)
+    # SPEC 2.3's 1.0 -> 0.1 survives presets written for epsilon-greedy DQN; a flag still wins
+    for preset in ("atari", "cartpole", "control"):
+        assert make_config("ob2i", "CartPole-v1", preset=preset).eps_end == 0.1
+    assert make_config("ddqn", "CartPole-v1", preset="cartpole").eps_end == 0.02
+    assert make_config("ob2i", "CartPole-v1", preset="cartpole", eps_end=0.05).eps_end == 0.05
     with pytest.raises(ConfigError, match="ob2i.num_heads"):
         validate(make_config("ob2i", ob2i__num_heads=1))
     with pytest.raises(ConfigError, match="whole episodes"):

@@ -70,7 +70,8 @@ COMMON: dict[str, Any] = {
 AGENTS: tuple[Agent, ...] = (
     Agent("DDQN", "ddqn"),
     Agent("BDQN", "bdqn", {"blr.redraw": "episode"}),
-    # OB2I anneals epsilon to 0.1 (SPEC 2.3); its Q-estimate variance is the heads' variance.
+    # OB2I anneals epsilon to 0.1 (SPEC 2.3, the config's ALGO_PINNED; COMMON's 0.05 is
+    # replaced here); its Q-estimate variance is the heads' variance.
     Agent("OB2I", "ob2i", {"eps_end": 0.1}),
     Agent("Farsighter (k=10)", "farsighter", {"k": 10}),
     Agent(
