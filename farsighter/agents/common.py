@@ -98,6 +98,19 @@ def clip_and_step(
     opt.step()
 
 
+def sample_minibatch(replay: ReplayBuffer, cfg: Config, batch_size: int, k: int) -> Batch:
+    """A k-step minibatch as the config asks for it: from the latest N transitions with
+    ``sample_recent``, one window per k steps with ``stride`` (Algorithm 1 literally). Raises
+    ValueError like :meth:`ReplayBuffer.sample` when no complete window is stored yet."""
+    return replay.sample(
+        batch_size,
+        k=k,
+        gamma=cfg.gamma,
+        recent=cfg.effective_recent_window if cfg.sample_recent else None,
+        stride=k if cfg.stride else 1,
+    )
+
+
 def updates_due(global_step: int, cfg: Config, done: int) -> int:
     """Representation updates owed at ``global_step`` (one every ``train_every`` steps after
     ``learning_starts``), so vectorised environments that advance several steps at once get the

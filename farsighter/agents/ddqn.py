@@ -14,10 +14,12 @@ from farsighter.agents.common import (
     batch_tensors,
     build_seeded,
     clip_and_step,
+    epsilon_greedy,
     linear_schedule,
     make_optimizer,
     make_replay,
     obs_tensor,
+    sample_minibatch,
     td_loss,
     updates_due,
 )
@@ -56,16 +58,13 @@ class DDQNAgent:
     # ------------------------------------------------------------------ acting
     def act(self, obs_E: np.ndarray, global_step: int, explore: bool = True) -> np.ndarray:
         """Epsilon-greedy actions for a batch of environments (greedy when not exploring)."""
-        n = obs_E.shape[0]
         if not explore:
             return self.greedy(obs_E)
         cfg = self.cfg
         self.epsilon = linear_schedule(cfg.eps_start, cfg.eps_end, cfg.eps_decay_steps, global_step)
-        random_E = np.asarray(self.rng.random(n) < self.epsilon)
-        random_actions_E = np.asarray(self.rng.integers(0, self.num_actions, size=n))
-        if random_E.all():  # no forward pass needed
-            return random_actions_E
-        return np.where(random_E, random_actions_E, self.greedy(obs_E))
+        return epsilon_greedy(
+            self.rng, self.epsilon, self.num_actions, lambda: self.greedy(obs_E), obs_E.shape[0]
+        )
 
     @torch.no_grad()
     def greedy(self, obs_E: np.ndarray) -> np.ndarray:
@@ -103,13 +102,7 @@ class DDQNAgent:
     def update(self) -> torch.Tensor:
         """One gradient step on the double-Q loss of a k-step minibatch; returns the loss."""
         cfg = self.cfg
-        batch = self.replay.sample(
-            cfg.batch_size,
-            k=cfg.k,
-            gamma=cfg.gamma,
-            recent=cfg.effective_recent_window if cfg.sample_recent else None,
-            stride=cfg.k if cfg.stride else 1,
-        )
+        batch = sample_minibatch(self.replay, cfg, cfg.batch_size, cfg.k)
         t = batch_tensors(batch, self.device)
         q_B = self.q(t["obs"]).gather(1, t["actions"].unsqueeze(1)).squeeze(1)
         with torch.no_grad():

@@ -37,6 +37,7 @@ from farsighter.agents.common import (
     make_optimizer,
     make_replay,
     obs_tensor,
+    sample_minibatch,
     td_loss,
     updates_due,
 )
@@ -181,13 +182,7 @@ class FarsighterAgent:
     def _sample(self) -> Batch | None:
         cfg = self.cfg
         try:
-            return self.replay.sample(
-                cfg.batch_size,
-                k=self.k,
-                gamma=cfg.gamma,
-                recent=cfg.effective_recent_window if cfg.sample_recent else None,
-                stride=self.k if cfg.stride else 1,
-            )
+            return sample_minibatch(self.replay, cfg, cfg.batch_size, self.k)
         except ValueError:  # not enough complete k-step windows yet
             return None
 

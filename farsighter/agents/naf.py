@@ -60,6 +60,7 @@ from farsighter.agents.common import (
     make_optimizer,
     make_replay,
     obs_tensor,
+    sample_minibatch,
     td_loss,
     updates_due,
 )
@@ -295,13 +296,7 @@ class NAFAgent:
     def _sample(self, batch_size: int) -> dict[str, torch.Tensor] | None:
         cfg = self.cfg
         try:
-            batch = self.replay.sample(
-                batch_size,
-                k=self.k,
-                gamma=cfg.gamma,
-                recent=cfg.effective_recent_window if cfg.sample_recent else None,
-                stride=self.k if cfg.stride else 1,
-            )
+            batch = sample_minibatch(self.replay, cfg, batch_size, self.k)
         except ValueError:  # not enough complete k-step windows yet (or the replay was emptied)
             return None
         if self.her is not None:

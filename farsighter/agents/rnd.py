@@ -38,6 +38,7 @@ from farsighter.agents.common import (
     make_optimizer,
     make_replay,
     obs_tensor,
+    sample_minibatch,
     td_loss,
     updates_due,
 )
@@ -208,13 +209,7 @@ class RNDAgent:
         """One double-Q step on extrinsic + weighted intrinsic k-step returns, then one predictor
         step on the same minibatch; returns the TD loss."""
         cfg = self.cfg
-        batch = self.replay.sample(
-            cfg.batch_size,
-            k=cfg.k,
-            gamma=cfg.gamma,
-            recent=cfg.effective_recent_window if cfg.sample_recent else None,
-            stride=cfg.k if cfg.stride else 1,
-        )
+        batch = sample_minibatch(self.replay, cfg, cfg.batch_size, cfg.k)
         t = batch_tensors(batch, self.device)
         ri_B = torch.as_tensor(self.intrinsic_returns(batch), device=self.device)
         returns_B = t["returns"] + cfg.rnd.intrinsic_weight * ri_B
