@@ -13,6 +13,18 @@ from farsighter.config import Config, make_config
 torch.set_num_threads(1)
 
 
+class GrabAgent:
+    """Training callback that keeps the trained agent (``on_finish``) for inspection."""
+
+    agent: Any = None
+
+    def on_step(self, global_step: int, info: dict[str, Any], agent: Any) -> None:
+        pass
+
+    def on_finish(self, run_dir: Path, agent: Any) -> None:
+        self.agent = agent
+
+
 def tiny(algo: str, run_dir: Path, env: str = "CartPole-v1", **kw: Any) -> Config:
     values: dict[str, Any] = dict(
         total_steps=1_500,

@@ -21,7 +21,7 @@ from farsighter.agents.ob2i import (
 )
 from farsighter.config import make_config, validate
 from farsighter.errors import ConfigError
-from tests.conftest import tiny
+from tests.conftest import GrabAgent, tiny
 
 # A three-step episode, K = 2 heads, A = 2 actions, gamma = 0.9, beta = 0.5.
 R = np.array([1.0, 0.0, 2.0], np.float32)
@@ -195,16 +195,6 @@ def test_config_defaults_and_validation(tmp_path: Path) -> None:
         validate(make_config("ob2i", k=3))
 
 
-class _Grab:
-    agent: Any = None
-
-    def on_step(self, global_step: int, info: dict[str, Any], agent: Any) -> None:
-        pass
-
-    def on_finish(self, run_dir: Path, agent: Any) -> None:
-        self.agent = agent
-
-
 def test_atari_smoke_with_frame_stacks(tmp_path: Path) -> None:
     pytest.importorskip("ale_py")
     cfg = make_config(
@@ -225,7 +215,7 @@ def test_atari_smoke_with_frame_stacks(tmp_path: Path) -> None:
         device="cpu",
         run_dir=str(tmp_path / "run"),
     )
-    grab = _Grab()
+    grab = GrabAgent()
     summary = farsighter.train(cfg, callbacks=[grab])
     assert summary["global_step"] == 300
     agent = grab.agent

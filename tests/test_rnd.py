@@ -15,7 +15,7 @@ import farsighter
 from farsighter.agents.common import RunningMeanStd
 from farsighter.agents.rnd import RNDAgent
 from farsighter.config import make_config
-from tests.conftest import tiny
+from tests.conftest import GrabAgent, tiny
 from tests.test_replay import fill
 
 
@@ -118,16 +118,6 @@ def test_config_defaults() -> None:
     assert cfg.rnd.feature_dim == 512 and cfg.rnd.obs_clip == 5.0
 
 
-class _Grab:
-    agent: Any = None
-
-    def on_step(self, global_step: int, info: dict[str, Any], agent: Any) -> None:
-        pass
-
-    def on_finish(self, run_dir: Path, agent: Any) -> None:
-        self.agent = agent
-
-
 def test_atari_smoke_with_frame_stacks(tmp_path: Path) -> None:
     pytest.importorskip("ale_py")
     cfg = make_config(
@@ -148,7 +138,7 @@ def test_atari_smoke_with_frame_stacks(tmp_path: Path) -> None:
         device="cpu",
         run_dir=str(tmp_path / "run"),
     )
-    grab = _Grab()
+    grab = GrabAgent()
     summary = farsighter.train(cfg, callbacks=[grab])
     assert summary["global_step"] == 300
     agent = grab.agent
