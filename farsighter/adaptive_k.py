@@ -11,7 +11,7 @@ from __future__ import annotations
 import math
 import numbers
 
-__all__ = ["adapt_k"]
+__all__ = ["adapt_k", "after_refresh"]
 
 
 def adapt_k(k: int, q_variance: float, target: float, k_min: int, k_max: int) -> int:
@@ -50,3 +50,26 @@ def adapt_k(k: int, q_variance: float, target: float, k_min: int, k_max: int) ->
     elif q_variance > target:
         k -= 1
     return int(min(max(k, k_min), k_max))
+
+
+def after_refresh(
+    k: int,
+    q_variance: float,
+    *,
+    enabled: bool,
+    variance_target: float,
+    k_min: int,
+    k_max: int,
+    empty_buffer: bool,
+    empty_every_refresh: bool,
+) -> tuple[int, bool]:
+    """Algorithm 1 line 7 after a posterior refresh: the new k, and whether to empty the replay.
+
+    With adaptive k off, k stays and nothing is emptied. Otherwise k moves by :func:`adapt_k`, and
+    the replay is emptied at every refresh (``empty_every_refresh``, the line read literally) or
+    when k changed (``empty_buffer``).
+    """
+    if not enabled:
+        return k, False
+    new_k = adapt_k(k, q_variance, variance_target, k_min, k_max)
+    return new_k, empty_every_refresh or (empty_buffer and new_k != k)

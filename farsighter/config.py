@@ -62,7 +62,15 @@ class BLRConfig:
     redraw_every: int = 1
     """T for ``redraw=every``."""
     target: Literal["mean", "thompson"] = "mean"
-    """Argmax of the Q-loss target under the posterior mean (Eq. 8) or a Thompson draw (BDQN code)."""
+    """Argmax of the Q-loss target under the posterior mean (Eq. 8), or under the latest acting
+    Thompson draw, one weight set for the whole minibatch (the BDQN authors' code)."""
+    posterior_sampling: Literal["recent", "uniform"] = "recent"
+    """Batch-mode refresh tuples: the latest D transitions (Table 1's 'most recent'), or D starts
+    drawn uniformly from the whole buffer with replacement (the BDQN authors' code)."""
+    posterior_target: Literal["double", "max"] = "double"
+    """Regression targets of a refresh: Eq. 8's double-Q target (argmax under the online features
+    and posterior mean, value under the target network and target mean), or the plain
+    max_a phi_target(s')^T mean_target_a (the BDQN authors' code)."""
 
 
 @dataclass(frozen=True)
@@ -78,7 +86,11 @@ class AdaptiveKConfig:
     k_max: int = 500
     """Upper bound for k."""
     empty_buffer: bool = True
-    """Empty the replay buffer after each change of k, as Algorithm 1 line 7 does."""
+    """Empty the replay buffer after each change of k (k-step targets are formed on sampling, so
+    keeping it is possible; off keeps every stored step)."""
+    empty_every_refresh: bool = False
+    """Empty the replay buffer after every posterior refresh whether k changed or not, as
+    Algorithm 1 line 7 reads literally ('...; Empty Replay buffer.' follows both branches)."""
 
 
 @dataclass(frozen=True)
@@ -112,8 +124,12 @@ class NAFConfig:
     hidden_sizes: tuple[int, ...] = (64, 32)
     """Representation MLP phi(s). Appendix 9.1.2: two layers of 64 and 32 units."""
     tau: float = 0.005
-    """Soft target update theta' <- tau theta + (1 - tau) theta' after every TD update
-    (Algorithm 3 line 11). Gu et al. (2016) use 0.001; 0.005 is TD3's / SB3's default."""
+    """Rate of the soft target update theta' <- tau theta + (1 - tau) theta' (Algorithm 3 line
+    11). Gu et al. (2016) use 0.001; 0.005 is TD3's / SB3's default."""
+    soft_update: Literal["every_update", "every_n"] = "every_update"
+    """When the soft target update runs: after every TD update (the convention of NAF's and
+    DDPG's code, Gu et al. 2016, Lillicrap et al. 2016), or once every N =
+    ``target_update_every`` environment steps, as Algorithm 3 line 11 reads literally."""
     updates_per_step: int = 1
     """TD updates per ``train_every`` environment steps (the I iterations of Algorithm 3 line 7)."""
     noise: Literal["gaussian", "ou"] = "gaussian"
@@ -174,6 +190,10 @@ class OB2IConfig:
 
     num_heads: int = 10
     """K: linear Q-heads on the shared torso, all trained on every sample (code: --num-ensemble 10)."""
+    separate_heads: bool = True
+    """Each head has its own last hidden layer, as in the authors' network (a 512-unit layer per
+    head on the shared convolutional torso; for an MLP torso the last layer of hidden_sizes is
+    replicated per head). False: linear heads on one shared torso (this library before v0.2)."""
     beta: float = 0.5
     """Diffusion factor of the episodic backward update (EBU, Lee et al. 2019; code: --beta 0.5)."""
     bonus_reward_weight: float = 5e-5
@@ -397,18 +417,26 @@ PRESETS: dict[str, Preset] = {
         ),
         Preset(
             "bdqn",
-            "The BDQN authors' settings (Atari scale) for the bdqn agent.",
+            "The BDQN authors' code as it runs (Atari scale), for the bdqn agent. Its redraw "
+            "condition `if frame_counter % f_sampling:` (f_sampling = 1000) is true on 999 of "
+            "1,000 frames, so the published BDQN redraws at every step except every 1,000th: "
+            "this preset redraws at every step (the skipped 1-in-1,000 redraw is the one "
+            "deliberate deviation). The bdqn algorithm's own default keeps the BDQN paper's "
+            "redraw every T = 1,000 steps.",
             "kazizzad/BDQN-MxNet-Gluon (public code), as listed in SPEC section 2.1",
             {
                 "target_update_every": 10_000,
-                "learning_starts": 20_000,
+                "learning_starts": 50_000,  # the code's learning start
                 "blr.prior_std": math.sqrt(1e-3),  # prior variance 1e-3
                 "blr.noise_std": 1.0,  # noise variance 1
                 "blr.cov_scale": 1e-3,  # stored covariance multiplied by the prior variance
                 "blr.posterior_every": 100_000,
                 "blr.posterior_samples": 100_000,  # min(|buffer|, 100k), statistics reset each time
+                "blr.posterior_sampling": "uniform",  # from the whole buffer, with replacement
+                "blr.posterior_target": "max",  # regression on r + gamma max_a phi'^T E_W_target
                 "blr.mode": "batch",
-                "blr.target": "thompson",  # argmax under the Thompson draw, value under target mean
+                "blr.redraw": "step",  # true on 999 of 1,000 frames in the code (see above)
+                "blr.target": "thompson",  # Q-loss argmax under the acting draw, value target mean
             },
         ),
         Preset(

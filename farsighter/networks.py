@@ -68,3 +68,32 @@ class QNetwork(nn.Module):
 
     def forward(self, obs: torch.Tensor) -> torch.Tensor:
         return self.head(self.torso(obs))
+
+
+class NatureConvTrunk(nn.Module):
+    """The Nature CNN without its 512-unit layer: conv layers and flatten, ``out_dim`` = n_flat
+    (3136 on 84x84 frames), for networks whose heads each own that layer (OB2I)."""
+
+    def __init__(self, in_channels: int, screen: int = 84) -> None:
+        super().__init__()
+        cnn = NatureCNN(in_channels, screen)
+        self.conv = cnn.conv  # NatureCNN's layers, so the two stay identical; its fc is dropped
+        with torch.no_grad():
+            self.out_dim = int(self.conv(torch.zeros(1, in_channels, screen, screen)).shape[1])
+
+    def forward(self, obs_BCHW: torch.Tensor) -> torch.Tensor:
+        return self.conv(obs_BCHW.float() / 255.0)
+
+
+def make_trunk(
+    obs_space: gym.spaces.Box, hidden_sizes: tuple[int, ...]
+) -> tuple[MLPTorso | NatureConvTrunk, int]:
+    """``make_torso`` without its last hidden layer, and that layer's width (512 for images), for
+    heads that each get their own copy of it. A one-layer MLP leaves the flattened observation."""
+    shape = obs_space.shape
+    assert shape is not None
+    if len(shape) == 3:
+        return NatureConvTrunk(shape[0], shape[1]), 512
+    if not hidden_sizes:
+        raise ValueError("per-head hidden layers need hidden_sizes with at least one layer")
+    return MLPTorso(int(np.prod(shape)), hidden_sizes[:-1]), hidden_sizes[-1]

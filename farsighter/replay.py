@@ -307,6 +307,18 @@ class ReplayBuffer:
             ls.append(logical)
         return np.concatenate(es), np.concatenate(ls)
 
+    def uniform_indices(self, n: int, rng: np.random.Generator) -> tuple[np.ndarray, np.ndarray]:
+        """(stream, logical index) of ``n`` rows drawn uniformly with replacement from every live
+        row (candidates: invalid starts are dropped by :meth:`sample_indices`)."""
+        low_E = self._low()
+        span_E = self.count - low_E
+        if not (span_E > 0).any():
+            empty = np.zeros(0, dtype=np.int64)
+            return empty, empty.copy()
+        e_N = rng.choice(self.num_envs, size=n, p=span_E / span_E.sum())
+        l_N = low_E[e_N] + (rng.random(n) * span_E[e_N]).astype(np.int64)
+        return e_N.astype(np.int64), l_N
+
     def sample_indices(
         self, e_B: np.ndarray, start_B: np.ndarray, k: int, gamma: float, stride: int = 1
     ) -> Batch:

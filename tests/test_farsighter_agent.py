@@ -127,12 +127,3 @@ def test_incremental_mode_accumulates_update_minibatches(tmp_path: Path) -> None
     y_stats = agent.head.phiy_AD.clone()
     agent.refresh_posterior()
     assert torch.equal(agent.head.phiy_AD, y_stats)  # a refresh alone adds nothing
-
-
-def test_stride_mode_learns_from_one_tuple_per_k(tmp_path: Path) -> None:
-    agent = make_agent(tmp_path, k=4, stride=True)
-    feed(agent, 400)
-    agent.update()
-    batch = agent.replay.sample(64, k=4, gamma=0.99, stride=4)
-    t_ep = agent.replay.t_ep[batch.env_index, batch.index % agent.replay.capacity]
-    assert (t_ep % 4 == 0).all()

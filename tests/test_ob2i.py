@@ -1,5 +1,6 @@
-"""OB2I: backward induction against hand-computed targets, the UCB-bonus, every head learning
-from every sample, acting, and an Atari-shaped smoke run."""
+"""OB2I: backward induction against hand-computed targets, the UCB-bonus, the per-head hidden
+layers of the authors' network, every head learning from every sample, acting, and an Atari-shaped
+smoke run."""
 
 from __future__ import annotations
 
@@ -10,9 +11,12 @@ import gymnasium as gym
 import numpy as np
 import pytest
 import torch
+from torch import nn
 
 import farsighter
 from farsighter.agents.ob2i import (
+    EnsembleHeads,
+    EnsembleQNetwork,
     OB2IAgent,
     backward_targets,
     ensemble_td_loss,
@@ -21,6 +25,7 @@ from farsighter.agents.ob2i import (
 )
 from farsighter.config import make_config, validate
 from farsighter.errors import ConfigError
+from farsighter.networks import make_torso
 from tests.conftest import GrabAgent, tiny
 
 # A three-step episode, K = 2 heads, A = 2 actions, gamma = 0.9, beta = 0.5.
@@ -105,18 +110,33 @@ def _fill(agent: OB2IAgent, lengths: list[int], seed: int = 0) -> None:
             )
 
 
-def test_bonus_is_zero_when_all_heads_agree(tmp_path: Path) -> None:
-    agent = _agent(tmp_path, ob2i__bonus_reward_weight=1.0, ob2i__bonus_next_weight=1.0)
+def _head_params(net: EnsembleQNetwork, k: int) -> list[torch.Tensor]:
+    """Views of the parameters of head k alone (per-head layers, or a slice of the linear heads)."""
+    h = net.heads
+    if isinstance(h, EnsembleHeads):
+        return [h.hidden_weight[k], h.hidden_bias[k], h.out_weight[k], h.out_bias[k]]
+    assert isinstance(h, nn.Linear)
+    return [h.weight.view(net.num_heads, net.num_actions, -1)[k], h.bias.view(net.num_heads, -1)[k]]
+
+
+@pytest.mark.parametrize("separate", [True, False])
+def test_bonus_is_zero_when_all_heads_agree(tmp_path: Path, separate: bool) -> None:
+    agent = _agent(
+        tmp_path,
+        ob2i__bonus_reward_weight=1.0,
+        ob2i__bonus_next_weight=1.0,
+        ob2i__separate_heads=separate,
+    )
     with torch.no_grad():  # every head a copy of head 0
-        w = agent.q.heads.weight.view(10, 2, -1)
-        b = agent.q.heads.bias.view(10, 2)
-        w[:] = w[0].clone()
-        b[:] = b[0].clone()
+        for k in range(1, 10):
+            for p_k, p_0 in zip(_head_params(agent.q, k), _head_params(agent.q, 0), strict=True):
+                p_k.copy_(p_0)
     agent.q_target.load_state_dict(agent.q.state_dict())
     _fill(agent, [7])
     ep = agent.replay.sample_episode()
     y = agent.episode_targets(ep)
-    assert abs(agent.stats["bonus_reward"]) < 1e-6 and abs(agent.stats["bonus_next"]) < 1e-6
+    # float32 rounding: numpy's std of K equal values can be ~1e-9 rather than 0
+    assert abs(agent.stats["bonus_reward"]) < 1e-5 and abs(agent.stats["bonus_next"]) < 1e-5
     rows = np.arange(1, 8)
     q_next = agent.q_target(agent._obs(0, rows)).detach().numpy()
     plain = backward_targets(ep.rewards, ep.actions, q_next, np.zeros((7, 10)), True, 0.99, 0.5)
@@ -135,6 +155,79 @@ def test_bonus_is_added_when_heads_disagree(tmp_path: Path) -> None:
     assert (y > plain).all()  # the immediate bonus is optimistic for every head
 
 
+MLP_SPACE = gym.spaces.Box(-1.0, 1.0, (4,), np.float32)
+IMAGE_SPACE = gym.spaces.Box(0, 255, (4, 84, 84), np.uint8)
+
+
+@pytest.mark.parametrize(
+    ("space", "hidden_sizes", "trunk_dim", "width"),
+    [
+        (MLP_SPACE, (32, 16), 32, 16),
+        (MLP_SPACE, (16,), 4, 16),  # one layer: the trunk is the flattened observation
+        (IMAGE_SPACE, (64, 32), 3136, 512),  # the Nature CNN's conv layers, 512 units per head
+    ],
+)
+def test_separate_heads_each_own_a_hidden_layer(
+    space: gym.spaces.Box, hidden_sizes: tuple[int, ...], trunk_dim: int, width: int
+) -> None:
+    torch.manual_seed(0)
+    net = EnsembleQNetwork(space, 3, 5, hidden_sizes, separate_heads=True)
+    assert isinstance(net.heads, EnsembleHeads)
+    assert net.torso.out_dim == trunk_dim
+    assert net.heads.hidden_weight.shape == (5, width, trunk_dim)
+    assert net.heads.out_weight.shape == (5, 3, width)
+    obs = torch.as_tensor(np.stack([space.sample() for _ in range(2)]))
+    with torch.no_grad():
+        q = net(obs)
+        assert q.shape == (2, 5, 3)
+        for i in range(4):  # each of head 2's layers: only head 2's Q moves
+            _head_params(net, 2)[i].add_(1.0)
+            moved = net(obs)
+            assert not torch.equal(moved[:, 2], q[:, 2])
+            assert torch.equal(moved[:, [0, 1, 3, 4]], q[:, [0, 1, 3, 4]])
+            q = moved
+
+
+def test_batched_heads_equal_separate_linear_layers() -> None:
+    torch.manual_seed(3)
+    heads = EnsembleHeads(7, 5, 3, 4)
+    torch.manual_seed(3)  # K separate heads, built in order, draw the same initial weights
+    mlps = [nn.Sequential(nn.Linear(7, 5), nn.ReLU(), nn.Linear(5, 3)) for _ in range(4)]
+    for k, mlp in enumerate(mlps):
+        assert torch.equal(mlp[0].weight, heads.hidden_weight[k])
+        assert torch.equal(mlp[0].bias, heads.hidden_bias[k])
+        assert torch.equal(mlp[2].weight, heads.out_weight[k])
+        assert torch.equal(mlp[2].bias, heads.out_bias[k])
+    with torch.no_grad():  # and the forward pass is the per-head loop, for any weights
+        for p in heads.parameters():
+            p.normal_()
+        for k, mlp in enumerate(mlps):
+            mlp[0].weight.copy_(heads.hidden_weight[k])
+            mlp[0].bias.copy_(heads.hidden_bias[k])
+            mlp[2].weight.copy_(heads.out_weight[k])
+            mlp[2].bias.copy_(heads.out_bias[k])
+    x_BD = torch.randn(6, 7)
+    q_BKA = heads(x_BD)
+    assert q_BKA.shape == (6, 4, 3)
+    assert torch.allclose(q_BKA, torch.stack([mlp(x_BD) for mlp in mlps], dim=1), atol=1e-5)
+
+
+def test_shared_heads_option_keeps_linear_heads_on_one_torso() -> None:
+    torch.manual_seed(1)
+    net = EnsembleQNetwork(MLP_SPACE, 2, 10, (32, 16), separate_heads=False)
+    assert isinstance(net.heads, nn.Linear)
+    torso = (4 * 32 + 32) + (32 * 16 + 16)
+    assert sum(p.numel() for p in net.parameters()) == torso + 10 * (16 * 2 + 2)
+    torch.manual_seed(1)  # the network of earlier versions, weight for weight
+    old_torso = make_torso(MLP_SPACE, (32, 16))
+    old_heads = nn.Linear(16, 10 * 2)
+    old = [*old_torso.parameters(), *old_heads.parameters()]
+    assert all(torch.equal(p, o) for p, o in zip(net.parameters(), old, strict=True))
+    separate = EnsembleQNetwork(MLP_SPACE, 2, 10, (32, 16), separate_heads=True)
+    trunk = 4 * 32 + 32
+    assert sum(p.numel() for p in separate.parameters()) == trunk + 10 * (32 * 16 + 16 + 16 * 2 + 2)
+
+
 def test_loss_gives_every_head_gradient_from_every_sample() -> None:
     q_BK = torch.randn(6, 4, requires_grad=True)
     y_BK = torch.randn(6, 4)
@@ -144,14 +237,19 @@ def test_loss_gives_every_head_gradient_from_every_sample() -> None:
     assert torch.allclose(q_BK.grad, 2 * (q_BK - y_BK).detach() / (6 * 4) / 4)
 
 
-def test_update_moves_every_head_and_walks_the_episode_backward(tmp_path: Path) -> None:
-    agent = _agent(tmp_path, batch_size=4)
+@pytest.mark.parametrize("separate", [True, False])
+def test_update_moves_every_head_and_walks_the_episode_backward(
+    tmp_path: Path, separate: bool
+) -> None:
+    agent = _agent(tmp_path, batch_size=4, ob2i__separate_heads=separate)
     _fill(agent, [10])
-    before = agent.q.heads.weight.detach().clone().view(10, 2, -1)
+    before = [[p.detach().clone() for p in _head_params(agent.q, k)] for k in range(10)]
     assert agent.update() is not None
     assert agent.episode is not None and agent.cursor == 6  # rows 6..9 first (the end)
-    after = agent.q.heads.weight.detach().view(10, 2, -1)
-    assert all(not torch.equal(before[k], after[k]) for k in range(10))
+    for k in range(10):  # every layer of every head moved
+        assert all(
+            not torch.equal(b, a) for b, a in zip(before[k], _head_params(agent.q, k), strict=True)
+        )
     agent.update()
     agent.update()
     assert agent.cursor == 0 and agent.episodes_learned == 1  # 4 + 4 + 2 rows
@@ -182,6 +280,7 @@ def test_one_head_per_episode_and_environment(tmp_path: Path) -> None:
 def test_config_defaults_and_validation(tmp_path: Path) -> None:
     cfg = make_config("ob2i", "CartPole-v1")
     assert cfg.ob2i.num_heads == 10 and cfg.ob2i.beta == 0.5
+    assert cfg.ob2i.separate_heads  # the authors' network: a hidden layer per head
     assert cfg.ob2i.bonus_reward_weight == cfg.ob2i.bonus_next_weight == 5e-5
     assert (cfg.eps_start, cfg.eps_end) == (1.0, 0.1)
     # SPEC 2.3's 1.0 -> 0.1 survives presets written for epsilon-greedy DQN; a flag still wins

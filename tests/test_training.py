@@ -151,3 +151,57 @@ def test_load_agent_acts_greedily(tmp_path: Path) -> None:
 def test_vectorised_environments(tmp_path: Path) -> None:
     summary = farsighter.train(tiny("farsighter", tmp_path / "run", num_envs=3, total_steps=900))
     assert summary["global_step"] == 900 and summary["episodes"] > 0
+
+
+@pytest.mark.parametrize(
+    ("algo", "extra"),
+    [
+        ("ddqn", {}),
+        ("kddqn", {}),
+        ("farsighter", {"adaptive_k__enabled": True, "adaptive_k__variance_target": 1e9}),
+        ("ob2i", {}),
+        ("rnd", {}),
+    ],
+)
+def test_resume_without_replay_refills_before_updating(
+    tmp_path: Path, algo: str, extra: dict[str, object], monkeypatch: pytest.MonkeyPatch
+) -> None:
+    """A checkpoint saved without its replay (the atari preset's default) resumes: the agent
+    acts for learning_starts (200) steps to refill before its first update, and adaptive k's
+    state comes back with the checkpoint."""
+    from farsighter.rundir import load_checkpoint
+
+    run = tmp_path / "run"
+    farsighter.train(tiny(algo, run, total_steps=1_000, save_replay=False, **extra))
+    saved = load_checkpoint(run)["agent"]
+    agent_cls = type(
+        farsighter.train.__globals__["build_agent"](
+            tiny(algo, run), *_spaces(), frame_stack=1, device=torch.device("cpu")
+        )
+    )
+    calls: list[int] = []
+    original = agent_cls.update
+
+    def counted(self, *args, **kwargs):  # type: ignore[no-untyped-def]
+        calls.append(1)
+        return original(self, *args, **kwargs)
+
+    monkeypatch.setattr(agent_cls, "update", counted)
+
+    class Watch:
+        seen: list[tuple[int, int, float]] = []
+
+        def on_step(self, global_step: int, info: dict, agent) -> None:  # type: ignore[no-untyped-def,type-arg]
+            self.seen.append((global_step, len(calls), agent.diagnostics().get("k", 0.0)))
+
+        def on_finish(self, run_dir: Path, agent) -> None:  # type: ignore[no-untyped-def]
+            pass
+
+    watch = Watch()
+    cfg = tiny(algo, run, total_steps=1_600, save_replay=False, resume=True, **extra)
+    farsighter.train(cfg, callbacks=[watch])
+    assert all(n == 0 for step, n, _ in watch.seen if step < 1_000 + 200)
+    assert watch.seen[-1][1] > 0  # and it learns again afterwards
+    if "adaptive_k__enabled" in extra:
+        assert saved["counters"]["k"] > tiny(algo, run, **extra).k  # k moved before the save
+        assert watch.seen[0][2] == saved["counters"]["k"]  # and came back with the checkpoint

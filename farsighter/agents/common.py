@@ -121,6 +121,43 @@ def updates_due(global_step: int, cfg: Config, done: int) -> int:
     return max(0, total - done)
 
 
+class UpdateClock:
+    """Counts the representation updates an agent has made and says how many are owed.
+
+    After a resume whose checkpoint holds no replay (the ``atari`` preset's default), the agent
+    must refill before it updates: :meth:`hold` pauses updates for ``cfg.learning_starts``
+    environment steps from the first :meth:`due` call after it (the warm-up a fresh run gets); the
+    updates that fall in that window are skipped, not made up afterwards.
+    """
+
+    def __init__(self, cfg: Config) -> None:
+        self.cfg = cfg
+        self.done = 0
+        self.hold_until = 0  # no updates before this global step
+        self._hold_pending = False
+
+    def hold(self) -> None:
+        self._hold_pending = True
+
+    def due(self, global_step: int) -> int:
+        """Updates owed now; they are counted as made."""
+        if self._hold_pending:
+            self.hold_until = global_step + self.cfg.learning_starts
+            self._hold_pending = False
+        n = updates_due(global_step, self.cfg, self.done)
+        self.done += n
+        return 0 if global_step < self.hold_until else n
+
+    def state_dict(self) -> dict[str, int]:
+        return {"done": self.done, "hold_until": self.hold_until}
+
+    def load_state_dict(self, state: dict[str, int] | int) -> None:
+        if isinstance(state, int):  # checkpoints before v0.2 stored the count alone
+            self.done, self.hold_until = state, 0
+        else:
+            self.done, self.hold_until = int(state["done"]), int(state["hold_until"])
+
+
 def build_seeded(seed: int, fn: Any) -> Any:
     """Run ``fn`` with torch's global RNG seeded, without leaking that state to the caller."""
     with torch.random.fork_rng(devices=[]):

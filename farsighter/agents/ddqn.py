@@ -11,6 +11,7 @@ import numpy as np
 import torch
 
 from farsighter.agents.common import (
+    UpdateClock,
     batch_tensors,
     build_seeded,
     clip_and_step,
@@ -21,7 +22,6 @@ from farsighter.agents.common import (
     obs_tensor,
     sample_minibatch,
     td_loss,
-    updates_due,
 )
 from farsighter.config import Config
 from farsighter.networks import QNetwork
@@ -51,7 +51,7 @@ class DDQNAgent:
         self.opt = make_optimizer(self.q.parameters(), cfg)
         self.replay = make_replay(cfg, obs_space, frame_stack, seed=cfg.seed + 1)
         self.rng = np.random.default_rng(cfg.seed + 2)
-        self.updates = 0
+        self.clock = UpdateClock(cfg)  # updates made; refill hold after resume
         self.target_syncs = 0
         self.epsilon = cfg.eps_start
 
@@ -90,9 +90,8 @@ class DDQNAgent:
     # ------------------------------------------------------------------ learning
     def learn(self, global_step: int) -> dict[str, torch.Tensor]:
         metrics: dict[str, torch.Tensor] = {}
-        for _ in range(updates_due(global_step, self.cfg, self.updates)):
+        for _ in range(self.clock.due(global_step)):
             metrics["td_loss"] = self.update()
-            self.updates += 1
         syncs = global_step // self.cfg.target_update_every
         if syncs > self.target_syncs:
             self.q_target.load_state_dict(self.q.state_dict())
@@ -105,13 +104,18 @@ class DDQNAgent:
         batch = sample_minibatch(self.replay, cfg, cfg.batch_size, cfg.k)
         t = batch_tensors(batch, self.device)
         q_B = self.q(t["obs"]).gather(1, t["actions"].unsqueeze(1)).squeeze(1)
-        with torch.no_grad():
-            y_B = double_q_target(
-                t["returns"], t["bootstrap"], self.q(t["next_obs"]), self.q_target(t["next_obs"])
-            )
+        y_B = self.targets(t)
         loss = td_loss(q_B, y_B, self.cfg.loss)
         clip_and_step(loss, list(self.q.parameters()), self.opt, cfg.max_grad_norm)
         return loss.detach()
+
+    @torch.no_grad()
+    def targets(self, t: dict[str, torch.Tensor]) -> torch.Tensor:
+        """Double-Q target (Eq. 2 with k-step returns): the online network picks the argmax at
+        s_{t+n}, the target network evaluates it."""
+        return double_q_target(
+            t["returns"], t["bootstrap"], self.q(t["next_obs"]), self.q_target(t["next_obs"])
+        )
 
     def diagnostics(self) -> dict[str, float]:
         return {"epsilon": self.epsilon, "k": float(self.cfg.k)}
@@ -123,7 +127,7 @@ class DDQNAgent:
             "q_target": self.q_target.state_dict(),
             "opt": self.opt.state_dict(),
             "rng": self.rng.bit_generator.state,
-            "counters": {"updates": self.updates, "target_syncs": self.target_syncs},
+            "counters": {"updates": self.clock.state_dict(), "target_syncs": self.target_syncs},
             "replay": self.replay.state_dict() if include_replay else None,
         }
 
@@ -132,10 +136,12 @@ class DDQNAgent:
         self.q_target.load_state_dict(state["q_target"])
         self.opt.load_state_dict(state["opt"])
         self.rng.bit_generator.state = state["rng"]
-        self.updates = state["counters"]["updates"]
+        self.clock.load_state_dict(state["counters"]["updates"])
         self.target_syncs = state["counters"]["target_syncs"]
         if state.get("replay") is not None:
             self.replay.load_state_dict(state["replay"])
+        else:  # saved without its replay: refill before updating again
+            self.clock.hold()
 
     def load_policy(self, state: dict[str, Any]) -> None:
         """Weights only (for acting from a finished run)."""

@@ -7,7 +7,8 @@ Q(s, a) = phi_theta(s)^T w_a with a Bayesian linear regression posterior over ea
   (``blr.redraw``). Before ``learning_starts`` actions are uniform, as for the epsilon agents.
 * Learning theta (Eq. 8): the double-Q loss with w fixed at the posterior mean, on k-step
   returns with gamma^k bootstraps (section 4.4), from the latest N transitions (Algorithm 1
-  line 4) when ``sample_recent``. Target network and target mean are copied every N steps.
+  line 4) when ``sample_recent``. Target network and target mean are copied every N steps,
+  after the posterior refresh when both fall on one step (Algorithm 1 lines 6 then 8).
 * Posterior (Algorithm 1 line 6): every M steps, from up to D recent tuples with features of the
   current theta and targets y from the target network exactly as in Eq. 8 (batch mode), or from
   running sufficient statistics (incremental mode, the online update the paper's appendix 10
@@ -29,8 +30,9 @@ import numpy as np
 import torch
 from torch import nn
 
-from farsighter.adaptive_k import adapt_k
+from farsighter.adaptive_k import after_refresh
 from farsighter.agents.common import (
+    UpdateClock,
     batch_tensors,
     build_seeded,
     clip_and_step,
@@ -39,7 +41,6 @@ from farsighter.agents.common import (
     obs_tensor,
     sample_minibatch,
     td_loss,
-    updates_due,
 )
 from farsighter.blr import BLRHead, greedy_predictive_variance
 from farsighter.config import Config
@@ -94,7 +95,7 @@ class FarsighterAgent:
         self.gen.manual_seed(cfg.seed + 3)
 
         self.k = cfg.k
-        self.updates = 0
+        self.clock = UpdateClock(cfg)  # updates made; refill hold after resume
         self.target_syncs = 0
         self.refreshes = 0
         self.draws = 0  # Thompson draws made (one per acting step with redraw=step)
@@ -121,23 +122,39 @@ class FarsighterAgent:
 
     def _thompson_q(self, phi_ED: torch.Tensor) -> torch.Tensor:
         blr = self.cfg.blr
-        self.draws += 1
-        if blr.redraw == "step":  # Algorithm 2 line 2: a fresh z at every step
-            return self.head.q_sample(phi_ED, generator=self.gen)
         n = phi_ED.shape[0]
-        if blr.redraw == "every":
+        if blr.redraw == "step" and blr.target != "thompson":
+            # Algorithm 2 line 2: a fresh z at every step, without forming weight matrices.
+            self.draws += n
+            return self.head.q_sample(phi_ED, generator=self.gen)
+        # Held draws; with blr.target = thompson the Q-loss reuses the acting draw, so a per-step
+        # draw is also made explicit here.
+        if blr.redraw == "step":
+            self.redraw_E[:] = True
+        elif blr.redraw == "every":
             if self.w_EAD is None or self.steps_since_draw >= blr.redraw_every:
                 self.redraw_E[:] = True
                 self.steps_since_draw = 0
             self.steps_since_draw += 1
         if self.w_EAD is None or self.w_EAD.shape[0] != n:
             self.w_EAD = self.head.sample_weights(n, generator=self.gen)
+            self.draws += n
             self.redraw_E[:] = False
         elif self.redraw_E.any():
             idx = np.flatnonzero(self.redraw_E)
             self.w_EAD[idx] = self.head.sample_weights(len(idx), generator=self.gen)
+            self.draws += len(idx)
             self.redraw_E[:] = False
         return torch.einsum("ed,ead->ea", phi_ED, self.w_EAD)
+
+    def _acting_draw(self) -> torch.Tensor:
+        """The weights (A, D) of the latest acting draw (environment 0), for blr.target = thompson:
+        the BDQN code's Q-loss takes its argmax under the one draw it acts with."""
+        if self.w_EAD is None:  # no Thompson action yet (uniform warm-up): draw as the code does
+            self.w_EAD = self.head.sample_weights(self.cfg.num_envs, generator=self.gen)
+            self.draws += self.cfg.num_envs
+            self.redraw_E[:] = False
+        return self.w_EAD[0]
 
     @torch.no_grad()
     def q_estimate(self, obs_B: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
@@ -163,20 +180,22 @@ class FarsighterAgent:
     def learn(self, global_step: int) -> dict[str, torch.Tensor]:
         cfg = self.cfg
         metrics: dict[str, torch.Tensor] = {}
-        for _ in range(updates_due(global_step, cfg, self.updates)):
-            self.updates += 1  # an update the replay cannot serve yet (after emptying) is skipped
+        for _ in range(self.clock.due(global_step)):
             loss = self.update()
             if loss is not None:
                 metrics["td_loss"] = loss
+        # Algorithm 1's order: the posterior refresh (line 6) comes before the target copy
+        # (line 8), so on a step where both fall the target mean is the fresh posterior mean
+        # (the BDQN code also sets E_W_target = E_W right after its regression).
+        refreshes = global_step // cfg.blr.posterior_every
+        if refreshes > self.refreshes and global_step >= cfg.learning_starts:
+            self.refreshes = refreshes
+            self.refresh_posterior()
         syncs = global_step // cfg.target_update_every
         if syncs > self.target_syncs:  # Algorithm 1 line 8
             self.torso_target.load_state_dict(self.torso.state_dict())
             self.target_mean_AD = self.head.mean_AD.clone()
             self.target_syncs = syncs
-        refreshes = global_step // cfg.blr.posterior_every
-        if refreshes > self.refreshes and global_step >= cfg.learning_starts:
-            self.refreshes = refreshes
-            self.refresh_posterior()
         return metrics
 
     def _sample(self) -> Batch | None:
@@ -190,15 +209,24 @@ class FarsighterAgent:
     def _targets(self, t: dict[str, torch.Tensor]) -> torch.Tensor:
         """y = r^k + gamma^k phi_target(s')^T mean_target[a*] (Eq. 8 with k-step returns).
 
-        a* is the argmax under the online features and the posterior mean (Eq. 8), or under a
-        Thompson draw when ``blr.target = thompson`` (the BDQN authors' code)."""
+        a* is the argmax under the online features and the posterior mean (Eq. 8), or under the
+        latest acting Thompson draw when ``blr.target = thompson`` (the BDQN authors' code)."""
         phi_next = self.torso(t["next_obs"])
-        if self.cfg.blr.target == "thompson":
-            q_next_online = self.head.q_sample(phi_next, generator=self.gen)
-        else:
-            q_next_online = phi_next @ self.head.mean_AD.T
+        w_online_AD = self._acting_draw() if self.cfg.blr.target == "thompson" else None
+        if w_online_AD is None:
+            w_online_AD = self.head.mean_AD
+        q_next_online = phi_next @ w_online_AD.T
         q_next_target = self.torso_target(t["next_obs"]) @ self.target_mean_AD.T
         return double_q_target(t["returns"], t["bootstrap"], q_next_online, q_next_target)
+
+    @torch.no_grad()
+    def _posterior_targets(self, t: dict[str, torch.Tensor]) -> torch.Tensor:
+        """Regression targets of a posterior refresh: Eq. 8's (``blr.posterior_target = double``)
+        or y = r^k + gamma^k max_a phi_target(s')^T mean_target_a (``max``, the BDQN code)."""
+        if self.cfg.blr.posterior_target == "double":
+            return self._targets(t)
+        q_next_target = self.torso_target(t["next_obs"]) @ self.target_mean_AD.T
+        return t["returns"] + t["bootstrap"] * q_next_target.max(dim=1).values
 
     def update(self) -> torch.Tensor | None:
         """One step on theta with w at the posterior mean (Eq. 8); the BLR weights stay fixed."""
@@ -212,7 +240,10 @@ class FarsighterAgent:
         loss = td_loss(q_B, y_B, self.cfg.loss)
         clip_and_step(loss, list(self.torso.parameters()), self.opt, self.cfg.max_grad_norm)
         if self.cfg.blr.mode == "incremental":
-            self._accumulate(phi_BD.detach(), t["actions"], y_B)
+            y_post_B = y_B if self.cfg.blr.posterior_target == "double" else None
+            if y_post_B is None:
+                y_post_B = self._posterior_targets(t)
+            self._accumulate(phi_BD.detach(), t["actions"], y_post_B)
         return loss.detach()
 
     def _accumulate(self, phi_BD: torch.Tensor, a_B: torch.Tensor, y_B: torch.Tensor) -> None:
@@ -233,14 +264,18 @@ class FarsighterAgent:
         phis, actions, ys = [], [], []
         for lo in range(0, len(e_N), FEATURE_CHUNK):
             part = self.replay.sample_indices(
-                e_N[lo : lo + FEATURE_CHUNK], l_N[lo : lo + FEATURE_CHUNK], self.k, self.cfg.gamma
+                e_N[lo : lo + FEATURE_CHUNK],
+                l_N[lo : lo + FEATURE_CHUNK],
+                self.k,
+                self.cfg.gamma,
+                stride=self.k if self.cfg.stride else 1,  # Algorithm 1 stores one tuple per k
             )
             if len(part.actions) == 0:
                 continue
             t = batch_tensors(part, self.device)
             phis.append(self.torso(t["obs"]))
             actions.append(t["actions"])
-            ys.append(self._targets(t))
+            ys.append(self._posterior_targets(t))
         if not phis:
             empty = torch.zeros(0, device=self.device)
             return empty, empty.long(), empty
@@ -250,7 +285,11 @@ class FarsighterAgent:
         """Algorithm 1 line 6 (and line 7 with adaptive k)."""
         cfg = self.cfg
         if cfg.blr.mode == "batch":
-            e_N, l_N = self.replay.recent_indices(cfg.blr.posterior_samples)
+            d = cfg.blr.posterior_samples
+            if cfg.blr.posterior_sampling == "uniform":  # the BDQN code: whole buffer, replaced
+                e_N, l_N = self.replay.uniform_indices(d, self.rng)
+            else:  # the latest D tuples; with stride one is stored per k steps, so k D rows
+                e_N, l_N = self.replay.recent_indices(d * (self.k if cfg.stride else 1))
             phi_ND, a_N, y_N = self._features_and_targets(e_N, l_N)
             if len(a_N) == 0:
                 return
@@ -261,13 +300,19 @@ class FarsighterAgent:
             self.head.refresh()
             phi_ND = self.recent_phi
         self.q_variance = greedy_predictive_variance(self.head, phi_ND)
-        ak = cfg.adaptive_k
-        if ak.enabled:
-            new_k = adapt_k(self.k, self.q_variance, ak.variance_target, ak.k_min, ak.k_max)
-            if new_k != self.k:
-                self.k = new_k
-                if ak.empty_buffer:
-                    self.replay.clear()
+        ak = cfg.adaptive_k  # Algorithm 1 line 7 after each posterior update
+        self.k, empty = after_refresh(
+            self.k,
+            self.q_variance,
+            enabled=ak.enabled,
+            variance_target=ak.variance_target,
+            k_min=ak.k_min,
+            k_max=ak.k_max,
+            empty_buffer=ak.empty_buffer,
+            empty_every_refresh=ak.empty_every_refresh,
+        )
+        if empty:
+            self.replay.clear()
 
     def diagnostics(self) -> dict[str, float]:
         return {
@@ -290,7 +335,7 @@ class FarsighterAgent:
             "w": self.w_EAD,
             "counters": {
                 "k": self.k,
-                "updates": self.updates,
+                "updates": self.clock.state_dict(),
                 "target_syncs": self.target_syncs,
                 "refreshes": self.refreshes,
                 "draws": self.draws,
@@ -312,10 +357,13 @@ class FarsighterAgent:
         self.gen.set_state(state["gen"])
         self.w_EAD = state["w"]
         c = state["counters"]
-        self.k, self.updates, self.target_syncs = c["k"], c["updates"], c["target_syncs"]
+        self.k, self.target_syncs = c["k"], c["target_syncs"]
+        self.clock.load_state_dict(c["updates"])
         self.refreshes, self.draws, self.q_variance = c["refreshes"], c["draws"], c["q_variance"]
         self.steps_since_draw = c["steps_since_draw"]
         self.redraw_E[...] = c["redraw"]
         self.recent_phi = c["recent_phi"]
         if state.get("replay") is not None:
             self.replay.load_state_dict(state["replay"])
+        else:  # saved without its replay: refill before updating again
+            self.clock.hold()

@@ -18,8 +18,9 @@ Learning alternates as section 4.3 describes:
 * every ``train_every`` steps, ``naf.updates_per_step`` TD steps on theta, theta_V, theta_P (and
   the plain mu-layer of naf/knaf) with the loss of Algorithm 3 line 9 and the target
   y = r^k + gamma^n (1 - terminal) V'(s') (Eq. 8 with argmax_a' Q = mu, so max Q' = V'); the
-  Bayesian mu-layer enters at its posterior mean and is not changed; after each step the
-  target network moves by ``tau`` (Algorithm 3 line 11);
+  Bayesian mu-layer enters at its posterior mean and is not changed; the target network moves
+  by ``tau`` after each TD step (the convention of NAF's and DDPG's code), or once every N steps
+  as Algorithm 3 line 11 reads (``naf.soft_update = every_n``);
 * (bnaf, farsighter-naf) every M = ``naf.elbo_every`` steps, ``naf.elbo_steps`` steps on the
   ELBO of Eq. 10 for the Bayesian mu-layer alone, theta, theta_V, theta_P frozen (see
   :meth:`NAFAgent.elbo_update` for how the loss is read).
@@ -52,8 +53,9 @@ import torch
 import torch.nn.functional as F
 from torch import nn
 
-from farsighter.adaptive_k import adapt_k
+from farsighter.adaptive_k import after_refresh
 from farsighter.agents.common import (
+    UpdateClock,
     batch_tensors,
     build_seeded,
     clip_and_step,
@@ -62,7 +64,6 @@ from farsighter.agents.common import (
     obs_tensor,
     sample_minibatch,
     td_loss,
-    updates_due,
 )
 from farsighter.bayes_layer import BayesianLinear, elbo_terms
 from farsighter.config import Config
@@ -206,7 +207,8 @@ class NAFAgent:
         self.ou_EA = np.zeros((cfg.num_envs, self.action_dim), dtype=np.float64)
 
         self.k = cfg.k
-        self.updates = 0  # train_every intervals served
+        self.clock = UpdateClock(cfg)  # updates made; refill hold after resume
+        self.target_syncs = 0  # soft target updates made with naf.soft_update = every_n
         self.td_steps = 0
         self.elbo_rounds = 0
         self.draws = 0  # weight draws made for acting (one per step)
@@ -278,12 +280,15 @@ class NAFAgent:
     def learn(self, global_step: int) -> dict[str, torch.Tensor]:
         cfg = self.cfg
         metrics: dict[str, torch.Tensor] = {}
-        for _ in range(updates_due(global_step, cfg, self.updates)):
-            self.updates += 1
+        for _ in range(self.clock.due(global_step)):
             for _ in range(cfg.naf.updates_per_step):
                 loss = self.update()
                 if loss is not None:
                     metrics["td_loss"] = loss
+        syncs = global_step // cfg.target_update_every
+        if cfg.naf.soft_update == "every_n" and syncs > self.target_syncs:
+            soft_update(self.net_target, self.net, cfg.naf.tau)  # Algorithm 3 line 11, literally
+            self.target_syncs = syncs
         if self.bayesian:
             rounds = global_step // cfg.naf.elbo_every
             if rounds > self.elbo_rounds and global_step >= cfg.learning_starts:
@@ -330,7 +335,8 @@ class NAFAgent:
         if not self.bayesian:  # keep tanh(mu) out of saturation (NAFConfig.mu_penalty)
             loss = loss + self.cfg.naf.mu_penalty * out_BA.pow(2).mean()
         clip_and_step(loss, self.td_params, self.opt, self.cfg.max_grad_norm)
-        soft_update(self.net_target, self.net, self.cfg.naf.tau)
+        if self.cfg.naf.soft_update == "every_update":
+            soft_update(self.net_target, self.net, self.cfg.naf.tau)
         self.td_steps += 1
         return loss.detach()
 
@@ -383,13 +389,19 @@ class NAFAgent:
             return None
         with torch.no_grad():
             self.q_variance = float(layer.output_mean_var(phi_BD)[1].mean())
-        ak = cfg.adaptive_k
-        if ak.enabled:  # Algorithm 1 line 7 after each posterior update
-            new_k = adapt_k(self.k, self.q_variance, ak.variance_target, ak.k_min, ak.k_max)
-            if new_k != self.k:
-                self.k = new_k
-                if ak.empty_buffer:
-                    self.replay.clear()
+        ak = cfg.adaptive_k  # Algorithm 1 line 7 after each posterior update
+        self.k, empty = after_refresh(
+            self.k,
+            self.q_variance,
+            enabled=ak.enabled,
+            variance_target=ak.variance_target,
+            k_min=ak.k_min,
+            k_max=ak.k_max,
+            empty_buffer=ak.empty_buffer,
+            empty_every_refresh=ak.empty_every_refresh,
+        )
+        if empty:
+            self.replay.clear()
         return loss
 
     def _q_at(
@@ -422,7 +434,8 @@ class NAFAgent:
             "ou": self.ou_EA.copy(),
             "counters": {
                 "k": self.k,
-                "updates": self.updates,
+                "updates": self.clock.state_dict(),
+                "target_syncs": self.target_syncs,
                 "td_steps": self.td_steps,
                 "elbo_rounds": self.elbo_rounds,
                 "draws": self.draws,
@@ -443,7 +456,9 @@ class NAFAgent:
         self.gen.set_state(state["gen"])
         self.ou_EA = np.array(state["ou"])
         c = state["counters"]
-        self.k, self.updates, self.td_steps = c["k"], c["updates"], c["td_steps"]
+        self.k, self.td_steps = c["k"], c["td_steps"]
+        self.target_syncs = c.get("target_syncs", 0)
+        self.clock.load_state_dict(c["updates"])
         self.elbo_rounds, self.draws, self.q_variance = (
             c["elbo_rounds"],
             c["draws"],
@@ -452,3 +467,5 @@ class NAFAgent:
         self.elbo_nll, self.elbo_kl = c["elbo_nll"], c["elbo_kl"]
         if state.get("replay") is not None:
             self.replay.load_state_dict(state["replay"])
+        else:  # saved without its replay: refill before updating again
+            self.clock.hold()

@@ -1,8 +1,11 @@
 """OB2I (Bai et al. 2021, "Principled exploration via optimistic bootstrapping and backward
 induction"), as the authors' code runs it (Baichenjia/OB2I, ``--ebu --reward-type ucb``; SPEC 2.3).
 
-Network: a shared torso phi(s) (MLP, or the Nature CNN for images) and K linear heads,
-Q_k(s, .) = W_k phi(s) + b_k. Every head learns from every sample (no bootstrap masks).
+Network (authors' models.py, BootQNetwork/HeadNN): a shared trunk phi(s) (the Nature CNN's
+conv layers for images, or the MLP without its last hidden layer) and K heads, each with its own
+hidden layer, Q_k(s, .) = W2_k relu(W1_k phi(s) + b1_k) + b2_k (512 units per head for images).
+With ``ob2i.separate_heads=False``, K linear heads on the whole torso, Q_k(s, .) = W_k phi(s) + b_k.
+Every head learns from every sample (no bootstrap masks).
 
 Acting: one head k_e drawn uniformly per episode and environment; epsilon-greedy on Q_{k_e} with
 epsilon annealed linearly from eps_start to eps_end (1.0 -> 0.1). Evaluation: majority vote of
@@ -34,6 +37,7 @@ Formulas implemented (OB2I section 3; symbols as in the paper, equation numbers 
 from __future__ import annotations
 
 import copy
+import math
 from typing import Any
 
 import gymnasium as gym
@@ -43,6 +47,7 @@ from torch import nn
 
 from farsighter.agents.common import (
     RunningMeanStd,
+    UpdateClock,
     build_seeded,
     clip_and_step,
     epsilon_greedy,
@@ -51,17 +56,52 @@ from farsighter.agents.common import (
     make_replay,
     obs_tensor,
     td_loss,
-    updates_due,
 )
 from farsighter.config import Config
-from farsighter.networks import make_torso
+from farsighter.networks import make_torso, make_trunk
 from farsighter.replay import Episode
 
 BONUS_EPS = 1e-8  # keeps the running-std division finite when every bonus is zero
 
 
+class EnsembleHeads(nn.Module):
+    """K heads Linear(d, h) + ReLU + Linear(h, A) computed together: (B, d) -> Q (B, K, A).
+
+    Head k's layers are ``hidden_weight[k]``, ``hidden_bias[k]`` and ``out_weight[k]``,
+    ``out_bias[k]``, laid out and initialised as K separate ``nn.Linear`` pairs would be.
+    """
+
+    def __init__(self, in_dim: int, hidden: int, num_actions: int, num_heads: int) -> None:
+        super().__init__()
+        self.hidden_weight = nn.Parameter(torch.empty(num_heads, hidden, in_dim))
+        self.hidden_bias = nn.Parameter(torch.empty(num_heads, hidden))
+        self.out_weight = nn.Parameter(torch.empty(num_heads, num_actions, hidden))
+        self.out_bias = nn.Parameter(torch.empty(num_heads, num_actions))
+        self.reset_parameters()
+
+    @torch.no_grad()
+    def reset_parameters(self) -> None:
+        """nn.Linear's default init, head by head in the order K Sequential(Linear, ReLU, Linear)
+        would draw it, so a seed gives the same weights as separate layers."""
+        for k in range(self.hidden_weight.shape[0]):
+            for w, b in (
+                (self.hidden_weight[k], self.hidden_bias[k]),
+                (self.out_weight[k], self.out_bias[k]),
+            ):
+                nn.init.kaiming_uniform_(w, a=math.sqrt(5))
+                bound = 1.0 / math.sqrt(w.shape[1])  # fan_in
+                nn.init.uniform_(b, -bound, bound)
+
+    def forward(self, x_BD: torch.Tensor) -> torch.Tensor:
+        num_heads, hidden, _ = self.hidden_weight.shape
+        # One matmul for all K hidden layers, then one batched matmul for the K output layers.
+        w1, b1 = self.hidden_weight.flatten(0, 1), self.hidden_bias.flatten()  # (K*H, D), (K*H,)
+        h_BKH = torch.relu(nn.functional.linear(x_BD, w1, b1)).view(-1, num_heads, hidden)
+        return torch.einsum("bkh,kah->bka", h_BKH, self.out_weight) + self.out_bias
+
+
 class EnsembleQNetwork(nn.Module):
-    """Shared torso and K linear heads in one layer: forward gives Q (B, K, A)."""
+    """Shared trunk and K heads (module docstring, "Network"): forward gives Q (B, K, A)."""
 
     def __init__(
         self,
@@ -69,11 +109,19 @@ class EnsembleQNetwork(nn.Module):
         num_actions: int,
         num_heads: int,
         hidden_sizes: tuple[int, ...],
+        separate_heads: bool = True,
     ) -> None:
         super().__init__()
-        self.torso = make_torso(obs_space, hidden_sizes)
-        # One Linear with K*A rows initialises each head exactly as K separate Linear(d, A).
-        self.heads = nn.Linear(self.torso.out_dim, num_heads * num_actions)
+        self.torso: nn.Module
+        self.heads: nn.Module
+        if separate_heads:  # authors' network: every head owns the last hidden layer
+            trunk, hidden = make_trunk(obs_space, hidden_sizes)
+            self.torso = trunk
+            self.heads = EnsembleHeads(trunk.out_dim, hidden, num_actions, num_heads)
+        else:
+            self.torso = make_torso(obs_space, hidden_sizes)
+            # One Linear with K*A rows initialises each head exactly as K separate Linear(d, A).
+            self.heads = nn.Linear(self.torso.out_dim, num_heads * num_actions)
         self.num_heads, self.num_actions = num_heads, num_actions
 
     def forward(self, obs: torch.Tensor) -> torch.Tensor:
@@ -147,7 +195,13 @@ class OB2IAgent:
         self.num_heads = cfg.ob2i.num_heads
         self.q = build_seeded(
             cfg.seed,
-            lambda: EnsembleQNetwork(obs_space, self.num_actions, self.num_heads, cfg.hidden_sizes),
+            lambda: EnsembleQNetwork(
+                obs_space,
+                self.num_actions,
+                self.num_heads,
+                cfg.hidden_sizes,
+                separate_heads=cfg.ob2i.separate_heads,
+            ),
         ).to(device)
         self.q_target = copy.deepcopy(self.q).requires_grad_(False)
         self.opt = make_optimizer(self.q.parameters(), cfg)
@@ -156,7 +210,7 @@ class OB2IAgent:
         self.head_E = self.rng.integers(0, self.num_heads, size=cfg.num_envs)
         self.next_bonus_rms = RunningMeanStd()
         self.reward_bonus_rms = RunningMeanStd()
-        self.updates = 0
+        self.clock = UpdateClock(cfg)  # updates made; refill hold after resume
         self.target_syncs = 0
         self.episodes_learned = 0
         self.epsilon = cfg.eps_start
@@ -223,8 +277,7 @@ class OB2IAgent:
     # ------------------------------------------------------------------ learning
     def learn(self, global_step: int) -> dict[str, torch.Tensor]:
         metrics: dict[str, torch.Tensor] = {}
-        for _ in range(updates_due(global_step, self.cfg, self.updates)):
-            self.updates += 1  # an update with no complete episode in the replay is skipped
+        for _ in range(self.clock.due(global_step)):  # skipped while no episode is complete
             loss = self.update()
             if loss is not None:
                 metrics["td_loss"] = loss
@@ -315,7 +368,7 @@ class OB2IAgent:
                 "reward": self.reward_bonus_rms.state_dict(),
             },
             "counters": {
-                "updates": self.updates,
+                "updates": self.clock.state_dict(),
                 "target_syncs": self.target_syncs,
                 "episodes_learned": self.episodes_learned,
                 "epsilon": self.epsilon,
@@ -336,12 +389,15 @@ class OB2IAgent:
         self.next_bonus_rms.load_state_dict(state["rms"]["next"])
         self.reward_bonus_rms.load_state_dict(state["rms"]["reward"])
         c = state["counters"]
-        self.updates, self.target_syncs = c["updates"], c["target_syncs"]
+        self.clock.load_state_dict(c["updates"])
+        self.target_syncs = c["target_syncs"]
         self.episodes_learned, self.epsilon = c["episodes_learned"], c["epsilon"]
         self.stats = dict(c["stats"])
         self.episode, self.cursor = None, 0
         if state.get("replay") is not None:
             self.replay.load_state_dict(state["replay"])
+        else:  # saved without its replay: refill before updating again
+            self.clock.hold()
             if state.get("episode") is not None:
                 self.episode = state["episode"]["episode"]
                 self.y_TK = state["episode"]["y"]

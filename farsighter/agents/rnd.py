@@ -30,6 +30,7 @@ from torch import nn
 
 from farsighter.agents.common import (
     RunningMeanStd,
+    UpdateClock,
     batch_tensors,
     build_seeded,
     clip_and_step,
@@ -40,7 +41,6 @@ from farsighter.agents.common import (
     obs_tensor,
     sample_minibatch,
     td_loss,
-    updates_due,
 )
 from farsighter.config import Config
 from farsighter.networks import QNetwork, make_torso
@@ -109,7 +109,7 @@ class RNDAgent:
         self.intrinsic_rms = RunningMeanStd()
         self.replay = make_replay(cfg, obs_space, frame_stack, seed=cfg.seed + 1)
         self.rng = np.random.default_rng(cfg.seed + 2)
-        self.updates = 0
+        self.clock = UpdateClock(cfg)  # updates made; refill hold after resume
         self.target_syncs = 0
         self.epsilon = cfg.eps_start
         self.stats = {"intrinsic_reward": float("nan"), "predictor_loss": float("nan")}
@@ -196,9 +196,8 @@ class RNDAgent:
     # ------------------------------------------------------------------ learning
     def learn(self, global_step: int) -> dict[str, torch.Tensor]:
         metrics: dict[str, torch.Tensor] = {}
-        for _ in range(updates_due(global_step, self.cfg, self.updates)):
+        for _ in range(self.clock.due(global_step)):
             metrics["td_loss"] = self.update()
-            self.updates += 1
         syncs = global_step // self.cfg.target_update_every
         if syncs > self.target_syncs:
             self.q_target.load_state_dict(self.q.state_dict())
@@ -244,7 +243,7 @@ class RNDAgent:
             "rms": {"obs": self.obs_rms.state_dict(), "intrinsic": self.intrinsic_rms.state_dict()},
             "rng": self.rng.bit_generator.state,
             "counters": {
-                "updates": self.updates,
+                "updates": self.clock.state_dict(),
                 "target_syncs": self.target_syncs,
                 "epsilon": self.epsilon,
                 "stats": dict(self.stats),
@@ -263,11 +262,10 @@ class RNDAgent:
         self.intrinsic_rms.load_state_dict(state["rms"]["intrinsic"])
         self.rng.bit_generator.state = state["rng"]
         c = state["counters"]
-        self.updates, self.target_syncs, self.epsilon = (
-            c["updates"],
-            c["target_syncs"],
-            c["epsilon"],
-        )
+        self.clock.load_state_dict(c["updates"])
+        self.target_syncs, self.epsilon = c["target_syncs"], c["epsilon"]
         self.stats = dict(c["stats"])
         if state.get("replay") is not None:
             self.replay.load_state_dict(state["replay"])
+        else:  # saved without its replay: refill before updating again
+            self.clock.hold()
