@@ -12,7 +12,6 @@ writes ``benchmarks/results/<name>.json`` with one entry per study and agent.
 from __future__ import annotations
 
 import argparse
-import json
 from pathlib import Path
 from typing import Any
 
