@@ -42,7 +42,7 @@ def study_collapses(study: Path) -> dict[str, Any]:
         status = run_status(run_dir)
         status["collapsed"] = status["q_start"] < -MAX_STEPS and status["success_last_quarter"] == 0
         out.setdefault(agent, {})[f"seed {seed}"] = status
-    for agent, runs in out.items():
+    for runs in out.values():
         flags = [r["collapsed"] for r in runs.values() if isinstance(r, dict)]
         runs["collapsed_seeds"] = f"{int(np.sum(flags))}/{len(flags)}"
     return out
