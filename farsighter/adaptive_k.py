@@ -11,6 +11,8 @@ from __future__ import annotations
 import math
 import numbers
 
+from farsighter.config import AdaptiveKConfig
+
 __all__ = ["adapt_k", "after_refresh"]
 
 
@@ -52,24 +54,14 @@ def adapt_k(k: int, q_variance: float, target: float, k_min: int, k_max: int) ->
     return int(min(max(k, k_min), k_max))
 
 
-def after_refresh(
-    k: int,
-    q_variance: float,
-    *,
-    enabled: bool,
-    variance_target: float,
-    k_min: int,
-    k_max: int,
-    empty_buffer: bool,
-    empty_every_refresh: bool,
-) -> tuple[int, bool]:
+def after_refresh(k: int, q_variance: float, ak: AdaptiveKConfig) -> tuple[int, bool]:
     """Algorithm 1 line 7 after a posterior refresh: the new k, and whether to empty the replay.
 
     With adaptive k off, k stays and nothing is emptied. Otherwise k moves by :func:`adapt_k`, and
-    the replay is emptied at every refresh (``empty_every_refresh``, the line read literally) or
-    when k changed (``empty_buffer``).
+    the replay is emptied at every refresh (``ak.empty_every_refresh``, the line read literally)
+    or when k changed (``ak.empty_buffer``).
     """
-    if not enabled:
+    if not ak.enabled:
         return k, False
-    new_k = adapt_k(k, q_variance, variance_target, k_min, k_max)
-    return new_k, empty_every_refresh or (empty_buffer and new_k != k)
+    new_k = adapt_k(k, q_variance, ak.variance_target, ak.k_min, ak.k_max)
+    return new_k, ak.empty_every_refresh or (ak.empty_buffer and new_k != k)

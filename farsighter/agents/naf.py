@@ -389,17 +389,8 @@ class NAFAgent:
             return None
         with torch.no_grad():
             self.q_variance = float(layer.output_mean_var(phi_BD)[1].mean())
-        ak = cfg.adaptive_k  # Algorithm 1 line 7 after each posterior update
-        self.k, empty = after_refresh(
-            self.k,
-            self.q_variance,
-            enabled=ak.enabled,
-            variance_target=ak.variance_target,
-            k_min=ak.k_min,
-            k_max=ak.k_max,
-            empty_buffer=ak.empty_buffer,
-            empty_every_refresh=ak.empty_every_refresh,
-        )
+        # Algorithm 1 line 7 after each posterior update
+        self.k, empty = after_refresh(self.k, self.q_variance, cfg.adaptive_k)
         if empty:
             self.replay.clear()
         return loss
