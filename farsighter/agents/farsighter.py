@@ -212,9 +212,8 @@ class FarsighterAgent:
         a* is the argmax under the online features and the posterior mean (Eq. 8), or under the
         latest acting Thompson draw when ``blr.target = thompson`` (the BDQN authors' code)."""
         phi_next = self.torso(t["next_obs"])
-        w_online_AD = self._acting_draw() if self.cfg.blr.target == "thompson" else None
-        if w_online_AD is None:
-            w_online_AD = self.head.mean_AD
+        thompson = self.cfg.blr.target == "thompson"
+        w_online_AD = self._acting_draw() if thompson else self.head.mean_AD
         q_next_online = phi_next @ w_online_AD.T
         q_next_target = self.torso_target(t["next_obs"]) @ self.target_mean_AD.T
         return double_q_target(t["returns"], t["bootstrap"], q_next_online, q_next_target)
@@ -240,9 +239,8 @@ class FarsighterAgent:
         loss = td_loss(q_B, y_B, self.cfg.loss)
         clip_and_step(loss, list(self.torso.parameters()), self.opt, self.cfg.max_grad_norm)
         if self.cfg.blr.mode == "incremental":
-            y_post_B = y_B if self.cfg.blr.posterior_target == "double" else None
-            if y_post_B is None:
-                y_post_B = self._posterior_targets(t)
+            double = self.cfg.blr.posterior_target == "double"
+            y_post_B = y_B if double else self._posterior_targets(t)
             self._accumulate(phi_BD.detach(), t["actions"], y_post_B)
         return loss.detach()
 
