@@ -320,3 +320,17 @@ def test_atari_smoke_with_frame_stacks(tmp_path: Path) -> None:
     agent = grab.agent
     assert agent.replay.frame_stack == 4 and agent.episodes_learned >= 1  # life-loss episodes
     assert np.isfinite(agent.diagnostics()["bonus"])
+
+
+def test_checkpoint_restores_the_episode_in_progress(tmp_path: Path) -> None:
+    """With the replay saved, a restored agent continues the episode it was walking backward."""
+    agent = _agent(tmp_path, batch_size=4)
+    _fill(agent, [10])
+    agent.update()  # rows 6..9 done, cursor at 6
+    restored = _agent(tmp_path, batch_size=4)
+    restored.load_state_dict(agent.state_dict(include_replay=True))
+    assert restored.episode is not None and restored.cursor == 6
+    assert np.array_equal(restored.y_TK, agent.y_TK)
+    without = _agent(tmp_path, batch_size=4)
+    without.load_state_dict(agent.state_dict(include_replay=False))
+    assert without.episode is None and without.cursor == 0  # its rows are not there

@@ -396,9 +396,9 @@ class OB2IAgent:
         self.episode, self.cursor = None, 0
         if state.get("replay") is not None:
             self.replay.load_state_dict(state["replay"])
-        else:  # saved without its replay: refill before updating again
-            self.clock.hold()
             if state.get("episode") is not None:
                 self.episode = state["episode"]["episode"]
                 self.y_TK = state["episode"]["y"]
                 self.cursor = state["episode"]["cursor"]
+        else:  # saved without its replay: refill before updating again
+            self.clock.hold()
