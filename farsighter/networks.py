@@ -78,8 +78,7 @@ class NatureConvTrunk(nn.Module):
         super().__init__()
         cnn = NatureCNN(in_channels, screen)
         self.conv = cnn.conv  # NatureCNN's layers, so the two stay identical; its fc is dropped
-        with torch.no_grad():
-            self.out_dim = int(self.conv(torch.zeros(1, in_channels, screen, screen)).shape[1])
+        self.out_dim = int(cnn.fc[0].in_features)
 
     def forward(self, obs_BCHW: torch.Tensor) -> torch.Tensor:
         return self.conv(obs_BCHW.float() / 255.0)

@@ -235,12 +235,10 @@ class ReplayBuffer:
         chosen_l: list[np.ndarray] = []
         chosen_n: list[np.ndarray] = []
         have = 0
-        weights_E = span_E / span_E.sum()
         for _ in range(max_tries):
             need = batch_size - have
             n_cand = max(2 * need, 8)
-            e_B = self.rng.choice(self.num_envs, size=n_cand, p=weights_E)
-            start_B = low_E[e_B] + (self.rng.random(n_cand) * span_E[e_B]).astype(np.int64)
+            e_B, start_B = self._draw_rows(low_E, span_E, n_cand, self.rng)
             ok_B, steps_B = self.valid_mask(e_B, start_B, k, stride)
             idx = np.flatnonzero(ok_B)[:need]
             chosen_e.append(e_B[idx])
@@ -315,7 +313,15 @@ class ReplayBuffer:
         if not (span_E > 0).any():
             empty = np.zeros(0, dtype=np.int64)
             return empty, empty.copy()
-        e_N = rng.choice(self.num_envs, size=n, p=span_E / span_E.sum())
+        return self._draw_rows(low_E, span_E, n, rng)
+
+    @staticmethod
+    def _draw_rows(
+        low_E: np.ndarray, span_E: np.ndarray, n: int, rng: np.random.Generator
+    ) -> tuple[np.ndarray, np.ndarray]:
+        """n (stream, logical index) pairs, uniform over the rows [low_E, low_E + span_E) of
+        every stream (streams weighted by their span), with replacement."""
+        e_N = rng.choice(len(low_E), size=n, p=span_E / span_E.sum())
         l_N = low_E[e_N] + (rng.random(n) * span_E[e_N]).astype(np.int64)
         return e_N.astype(np.int64), l_N
 
