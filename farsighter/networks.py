@@ -42,6 +42,7 @@ class NatureCNN(nn.Module):
         with torch.no_grad():
             n_flat = self.conv(torch.zeros(1, in_channels, screen, screen)).shape[1]
         self.fc = nn.Sequential(nn.Linear(n_flat, 512), nn.ReLU())
+        self.n_flat = int(n_flat)  # width of the convolutions' output (3136 on 84x84 frames)
         self.out_dim = 512
 
     def forward(self, obs_BCHW: torch.Tensor) -> torch.Tensor:
@@ -78,7 +79,7 @@ class NatureConvTrunk(nn.Module):
         super().__init__()
         cnn = NatureCNN(in_channels, screen)
         self.conv = cnn.conv  # NatureCNN's layers, so the two stay identical; its fc is dropped
-        self.out_dim = int(cnn.fc[0].in_features)
+        self.out_dim = cnn.n_flat
 
     def forward(self, obs_BCHW: torch.Tensor) -> torch.Tensor:
         return self.conv(obs_BCHW.float() / 255.0)
