@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import pytest
 
-from farsighter.adaptive_k import adapt_k
+from farsighter.ops.adaptive_k import adapt_k
 
 
 def test_moves_towards_target() -> None:

@@ -1,4 +1,4 @@
-"""Tests for farsighter.bayes_layer: BayesianLinear moments, KL, sampling and the ELBO."""
+"""Tests for farsighter.ops.bayes_layer: BayesianLinear moments, KL, sampling and the ELBO."""
 
 from __future__ import annotations
 
@@ -9,7 +9,7 @@ import pytest
 import torch
 from torch.distributions import Normal
 
-from farsighter.bayes_layer import (
+from farsighter.ops.bayes_layer import (
     BayesianLinear,
     elbo_loss,
     elbo_terms,

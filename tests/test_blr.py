@@ -6,7 +6,7 @@ import numpy as np
 import pytest
 import torch
 
-from farsighter.blr import (
+from farsighter.ops.blr import (
     BLRHead,
     blr_posterior,
     cholesky_jitter,

@@ -18,8 +18,8 @@ from farsighter.config import Config
 from farsighter.envs import check_spaces, make_env
 from farsighter.envs.factory import goal_spec
 from farsighter.errors import EnvError
-from farsighter.her import episode_last_rows, relabel_future
 from farsighter.replay import FINAL
+from farsighter.replay.her import episode_last_rows, relabel_future
 from tests.conftest import tiny
 
 GOAL_ENV = "tests.goal_env:PointGoal-v0"

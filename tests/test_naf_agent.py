@@ -12,8 +12,8 @@ import torch
 
 from farsighter.agents import build_agent
 from farsighter.agents.naf import NAFAgent
-from farsighter.bayes_layer import BayesianLinear
 from farsighter.config import Config
+from farsighter.ops.bayes_layer import BayesianLinear
 from farsighter.ops.naf import naf_q, naf_td_target
 from tests.conftest import tiny
 

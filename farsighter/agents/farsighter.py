@@ -30,7 +30,6 @@ import numpy as np
 import torch
 from torch import nn
 
-from farsighter.adaptive_k import after_refresh
 from farsighter.agents.common import (
     UpdateClock,
     batch_tensors,
@@ -42,9 +41,10 @@ from farsighter.agents.common import (
     sample_minibatch,
     td_loss,
 )
-from farsighter.blr import BLRHead, greedy_predictive_variance
 from farsighter.config import Config
 from farsighter.networks import make_torso
+from farsighter.ops.adaptive_k import after_refresh
+from farsighter.ops.blr import BLRHead, greedy_predictive_variance
 from farsighter.ops.targets import double_q_target
 from farsighter.replay import Batch
 

@@ -7,7 +7,7 @@ mu-layer, mu(s) = scale(tanh(mu_layer(phi(s)))) inside the action bounds. The fo
 
 * ``naf``: plain ``nn.Linear`` mu-layer, Gaussian or Ornstein-Uhlenbeck action noise, 1-step.
 * ``knaf``: the same with k-step returns (section 5.2's multi-step NAF baseline).
-* ``bnaf``: the mu-layer is a :class:`~farsighter.bayes_layer.BayesianLinear` (Bayes by
+* ``bnaf``: the mu-layer is a :class:`~farsighter.ops.bayes_layer.BayesianLinear` (Bayes by
   backprop, appendix 8); one weight set is sampled per environment per step and the agent acts
   with the sampled mu (Algorithm 3 line 4), 1-step.
 * ``farsighter-naf``: the same draws, re-made at every step, over k-step windows (section 4.4,
@@ -53,7 +53,6 @@ import torch
 import torch.nn.functional as F
 from torch import nn
 
-from farsighter.adaptive_k import after_refresh
 from farsighter.agents.common import (
     UpdateClock,
     batch_tensors,
@@ -65,10 +64,11 @@ from farsighter.agents.common import (
     sample_minibatch,
     td_loss,
 )
-from farsighter.bayes_layer import BayesianLinear, elbo_terms
 from farsighter.config import Config
 from farsighter.errors import ConfigError
 from farsighter.networks import MLPTorso
+from farsighter.ops.adaptive_k import after_refresh
+from farsighter.ops.bayes_layer import BayesianLinear, elbo_terms
 from farsighter.ops.naf import NAFHead, naf_q, naf_td_target, scale_action
 
 BAYESIAN_ALGOS = ("bnaf", "farsighter-naf")
@@ -305,7 +305,7 @@ class NAFAgent:
         except ValueError:  # not enough complete k-step windows yet (or the replay was emptied)
             return None
         if self.her is not None:
-            from farsighter.her import relabel_future
+            from farsighter.replay.her import relabel_future
 
             batch = relabel_future(
                 batch,

@@ -6,7 +6,7 @@
 with L lower-triangular and its diagonal exponentiated, so P is positive definite and
 argmax_a Q(s, a) = mu(s). The architecture (appendix 9.1.2, SPEC 2.2): a 64-32 MLP
 representation phi(s), linear V and L heads on top of it (:class:`NAFHead`), and a mu-layer
-(Bayesian in ``bnaf`` / ``farsighter-naf``, see :mod:`farsighter.bayes_layer`) whose output is
+(Bayesian in ``bnaf`` / ``farsighter-naf``, see :mod:`farsighter.ops.bayes_layer`) whose output is
 tanh-squashed to [-1, 1] and scaled to the action bounds with :func:`scale_action`.
 
 Shape suffixes: B batch, A action dimension, M = A (A + 1) / 2 entries of L, D representation.
@@ -155,7 +155,7 @@ class NAFHead(nn.Module):
 
     Both are single linear layers: V: D -> 1, L: D -> A (A + 1) / 2 entries turned into a
     lower-triangular matrix by :func:`lower_triangular`. The mu stream is not part of this head
-    (in the agents it is a :class:`~farsighter.bayes_layer.BayesianLinear` or ``nn.Linear``
+    (in the agents it is a :class:`~farsighter.ops.bayes_layer.BayesianLinear` or ``nn.Linear``
     followed by tanh and :func:`scale_action`). Q is then
     ``naf_q(v_B, mu_BA, l_BAA, action_BA)``.
 

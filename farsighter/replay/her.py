@@ -20,7 +20,7 @@ from __future__ import annotations
 import numpy as np
 
 from farsighter.envs.factory import GoalSpec
-from farsighter.replay import FINAL, Batch, ReplayBuffer
+from farsighter.replay.buffer import FINAL, Batch, ReplayBuffer
 
 SCAN = 64  # rows looked at per pass when searching for the end of an episode
 

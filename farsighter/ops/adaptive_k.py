@@ -1,7 +1,7 @@
 """Adaptive horizon k of Farsighter (paper section 4.5, Algorithm 1 line 7, SPEC 2.1).
 
 After every posterior refresh the agent measures the Q-variance (mean over the refresh states of
-phi^T Cov_a phi at the greedy action, see ``farsighter.blr.greedy_predictive_variance``) and
+phi^T Cov_a phi at the greedy action, see ``farsighter.ops.blr.greedy_predictive_variance``) and
 nudges k by one step towards the variance target epsilon: too little uncertainty means look
 further ahead (k + 1), too much means look less far (k - 1).
 """
