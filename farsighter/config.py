@@ -4,9 +4,12 @@ A run is a pure function of its :class:`Config` and seed. Configs are frozen dat
 docstring per field (tyro turns those into ``--help`` text). Presets are named sets of field
 values whose numbers cite their source; ``make_config`` layers them as
 
-    field defaults  <-  algorithm defaults  <-  preset  <-  explicit overrides
+    field defaults  <-  preset  <-  algorithm  <-  explicit overrides
 
-and nothing mutates a config after it is built.
+where "algorithm" is the values that define it (:mod:`farsighter.algorithms`), so a preset's
+generic schedule never replaces them. A preset made for one algorithm (``Preset.algo``, e.g.
+``bdqn``: that algorithm as its authors' code ran) is that algorithm's own variant: it is only
+accepted with it and applies over its values. Nothing mutates a config after it is built.
 """
 
 from __future__ import annotations
@@ -18,25 +21,8 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any, Literal
 
+from farsighter import algorithms
 from farsighter.errors import ConfigError
-
-ALGORITHMS: tuple[str, ...] = (
-    "ddqn",
-    "kddqn",
-    "bdqn",
-    "farsighter",
-    "naf",
-    "knaf",
-    "bnaf",
-    "farsighter-naf",
-    "ob2i",
-    "rnd",
-    "krnd",
-)
-"""Algorithms this version can train (SPEC section 2 lists the full family)."""
-
-PLANNED_ALGORITHMS: tuple[str, ...] = ()
-"""Algorithms of the paper that are specified but not yet implemented in this version."""
 
 
 @dataclass(frozen=True)
@@ -185,7 +171,8 @@ class OB2IConfig:
     """OB2I (Bai et al. 2021): bootstrapped Q-heads, UCB-bonus, episodic backward update.
 
     Defaults are the authors' code (Baichenjia/OB2I, ``run_atari.py --ebu --reward-type ucb``) as
-    recorded in SPEC section 2.3; the epsilon schedule 1.0 -> 0.1 is ALGO_PINNED["ob2i"].
+    recorded in SPEC section 2.3; the epsilon schedule 1.0 -> 0.1 is the ob2i algorithm's own
+    (:mod:`farsighter.algorithms`).
     """
 
     num_heads: int = 10
@@ -236,8 +223,8 @@ class Config:
     """One training run: everything needed to reproduce it."""
 
     algo: str = "ddqn"
-    """Algorithm: one of ddqn, kddqn, bdqn, farsighter, naf, knaf, bnaf, farsighter-naf, ob2i,
-    rnd, krnd."""
+    """Algorithm: one of ddqn, kddqn, bdqn, farsighter, ob2i, rnd, krnd (discrete actions); naf,
+    knaf, bnaf, farsighter-naf (continuous). farsighter.algorithms is the table."""
     env: str = "CartPole-v1"
     """Any Gymnasium id, passed to gymnasium.make unchanged (``module:EnvId`` works)."""
     seed: int = 1
@@ -362,6 +349,8 @@ class Preset:
     doc: str
     source: str
     values: dict[str, Any]
+    algo: str = ""
+    """Made for this algorithm only (its variant): refused with others, applied over its values."""
 
 
 PRESETS: dict[str, Preset] = {
@@ -424,7 +413,8 @@ PRESETS: dict[str, Preset] = {
             "deliberate deviation). The bdqn algorithm's own default keeps the BDQN paper's "
             "redraw every T = 1,000 steps.",
             "kazizzad/BDQN-MxNet-Gluon (public code), as listed in SPEC section 2.1",
-            {
+            algo="bdqn",
+            values={
                 "target_update_every": 10_000,
                 "learning_starts": 50_000,  # the code's learning start
                 "blr.prior_std": math.sqrt(1e-3),  # prior variance 1e-3
@@ -541,46 +531,6 @@ PRESETS: dict[str, Preset] = {
     )
 }
 
-ALGO_DEFAULTS: dict[str, dict[str, Any]] = {
-    "ddqn": {},
-    # k-DDQN: epsilon-greedy with k-step returns (paper section 5.2 baselines).
-    "kddqn": {"k": 3},
-    # BDQN: Thompson sampling on the BLR posterior, 1-step (section 4.2). A new weight draw every
-    # T^sample = 1,000 steps as in Azizzadenesheli et al. (2018); --blr.redraw changes it.
-    "bdqn": {"k": 1, "blr.redraw": "every", "blr.redraw_every": 1_000},
-    # Farsighter: fresh draw every step (Algorithm 2), k-step returns, minibatches from the latest
-    # N transitions (Algorithm 1 line 4). k = 10 is the smallest k of Figure 4.
-    "farsighter": {"k": 10, "blr.redraw": "step", "sample_recent": True},
-    # OB2I: epsilon annealed 1.0 -> 0.1 around the head drawn per episode (ALGO_PINNED).
-    "ob2i": {},
-    # RND on DDQN, 1-step; k-step RND (TD(K)+RND of appendix 9.1.1) with k = 3 as for kddqn.
-    "rnd": {},
-    "krnd": {"k": 3},
-    # NAF (section 3.3): Gaussian action noise, 1-step. The continuous agents' TD loss is the
-    # squared error of Gu et al. (2016) / Algorithm 3 line 9.
-    "naf": {"k": 1, "loss": "mse"},
-    # Multi-step NAF (section 5.2 baselines): k-step returns; k = 5 as D4PG's n-step returns
-    # (Barth-Maron et al. 2018), the paper gives no k for continuous control.
-    "knaf": {"k": 5, "loss": "mse"},
-    # Bayesian NAF (section 4.3, Algorithm 3): mu-layer weights sampled per step, 1-step. The
-    # Bayesian agents explore only through the mu-layer's weight draws, which tanh saturation
-    # silences, so they keep its pre-tanh output small (NAFConfig.mu_penalty; our tuning).
-    "bnaf": {"k": 1, "loss": "mse", "naf.mu_penalty": 0.1},
-    # Farsighter-NAF (sections 4.3-4.4): weights re-drawn every step over k steps; same k as knaf.
-    "farsighter-naf": {"k": 5, "loss": "mse", "naf.mu_penalty": 0.1},
-}
-
-# Values that define an algorithm: applied after the preset (a preset's generic schedule does not
-# replace them), before the user's flags (which still do).
-ALGO_PINNED: dict[str, dict[str, Any]] = {
-    # OB2I anneals epsilon from 1.0 to 0.1 (authors' code: --exploration-final-eps 0.1, SPEC 2.3);
-    # the atari and cartpole presets' 0.01 / 0.02 are for epsilon-greedy DQN.
-    "ob2i": {"eps_end": 0.1},
-}
-
-NAF_ALGORITHMS: tuple[str, ...] = ("naf", "knaf", "bnaf", "farsighter-naf")
-"""The continuous-action agents (Box actions)."""
-
 
 def _nested_replace(obj: Any, dotted: dict[str, Any]) -> Any:
     """``dataclasses.replace`` with dotted keys for nested dataclasses; unknown keys raise."""
@@ -611,7 +561,8 @@ def resolve_preset_name(preset: str, env: str, algo: str = "") -> str:
     if preset == "auto":
         if is_atari_id(env):
             return "atari"
-        return "continuous" if algo in NAF_ALGORITHMS else "control"
+        continuous = algo and algorithms.get(algo).actions == "continuous"
+        return "continuous" if continuous else "control"
     if preset not in PRESETS:
         raise ConfigError(f"unknown preset '{preset}'; accepted: auto, {', '.join(PRESETS)}")
     return preset
@@ -620,35 +571,33 @@ def resolve_preset_name(preset: str, env: str, algo: str = "") -> str:
 def make_config(
     algo: str = "ddqn", env: str = "CartPole-v1", preset: str = "auto", **overrides: Any
 ) -> Config:
-    """Build a config: field defaults <- algorithm defaults <- preset <- the algorithm's pinned
-    values (:data:`ALGO_PINNED`) <- ``overrides``.
+    """Build a config: field defaults <- preset <- the algorithm's values (a preset made for the
+    algorithm comes after them) <- ``overrides``.
 
     ``overrides`` use field names; nested fields are written ``blr__prior_std`` or passed in a
     dict as ``{"blr.prior_std": ...}`` via ``**{"blr.prior_std": 0.1}``.
     """
-    if algo not in ALGORITHMS:
-        raise ConfigError(unknown_algo_message(algo))
+    spec = algorithms.get(algo)
     name = resolve_preset_name(preset, env, algo)
+    chosen = PRESETS[name]
+    if chosen.algo and chosen.algo != algo:
+        raise ConfigError(
+            f"preset '{name}' is made for --algo {chosen.algo} (got --algo {algo}); "
+            f"accepted presets for {algo}: auto, "
+            + ", ".join(p.name for p in PRESETS.values() if p.algo in ("", algo))
+        )
+    layers = [spec.defaults, chosen.values] if chosen.algo else [chosen.values, spec.defaults]
     values: dict[str, Any] = {}
-    values.update(ALGO_DEFAULTS[algo])
-    values.update(PRESETS[name].values)
-    values.update(ALGO_PINNED.get(algo, {}))
+    for layer in layers:
+        values.update(layer)
     values.update({k.replace("__", "."): v for k, v in overrides.items()})
     values.update({"algo": algo, "env": env, "preset": name})
     return _nested_replace(Config(), values)
 
 
-def unknown_algo_message(algo: str) -> str:
-    planned = f" ({', '.join(PLANNED_ALGORITHMS)} are planned)" if PLANNED_ALGORITHMS else ""
-    if algo in PLANNED_ALGORITHMS:
-        return f"algorithm '{algo}' is not implemented yet; accepted: {', '.join(ALGORITHMS)}"
-    return f"unknown algorithm '{algo}'; accepted: {', '.join(ALGORITHMS)}{planned}"
-
-
 def validate(cfg: Config) -> None:
     """Raise :class:`ConfigError` with one line naming the problem and what is accepted."""
-    if cfg.algo not in ALGORITHMS:
-        raise ConfigError(unknown_algo_message(cfg.algo))
+    spec = algorithms.get(cfg.algo)
     checks: list[tuple[bool, str]] = [
         (cfg.k >= 1, f"k must be an integer >= 1 (got {cfg.k})"),
         (cfg.lr > 0, f"lr must be > 0 (got {cfg.lr})"),
@@ -722,17 +671,18 @@ def validate(cfg: Config) -> None:
         (rn.lr > 0, f"rnd.lr must be > 0 (got {rn.lr})"),
         (rn.obs_clip > 0, f"rnd.obs_clip must be > 0 (got {rn.obs_clip})"),
         (
-            cfg.algo != "ob2i" or (cfg.k == 1 and not cfg.stride and not cfg.sample_recent),
-            "ob2i learns from whole episodes (episodic backward update): k must be 1 and "
+            not spec.episodic or (cfg.k == 1 and not cfg.stride and not cfg.sample_recent),
+            f"{cfg.algo} learns from whole episodes (episodic backward update): k must be 1 and "
             "stride and sample_recent off",
         ),
     ]
     for ok, message in ob2i_rnd_checks:
         if not ok:
             raise ConfigError(message)
-    if cfg.adaptive_k.enabled and cfg.algo not in ("farsighter", "farsighter-naf"):
+    if cfg.adaptive_k.enabled and not spec.adaptive_k:
         raise ConfigError(
-            "adaptive_k.enabled is only supported by --algo farsighter and farsighter-naf"
+            "adaptive_k.enabled is only supported by --algo "
+            + " and ".join(a.name for a in algorithms.TABLE if a.adaptive_k)
         )
     n = cfg.naf
     naf_checks: list[tuple[bool, str]] = [
@@ -754,9 +704,13 @@ def validate(cfg: Config) -> None:
         (n.kl_weight >= 0, "naf.kl_weight must be >= 0"),
         (n.mu_penalty >= 0, "naf.mu_penalty must be >= 0"),
         (0.0 <= n.her_ratio <= 1.0, f"naf.her_ratio must be in [0, 1] (got {n.her_ratio})"),
-        (not n.her or cfg.algo in NAF_ALGORITHMS, "naf.her needs a continuous agent (naf, ...)"),
         (
-            cfg.algo not in NAF_ALGORITHMS or n.elbo_batch <= cfg.buffer_size,
+            not n.her or spec.actions == "continuous",
+            "naf.her needs a continuous agent: "
+            + algorithms.accepted(algorithms.names_for("continuous")),
+        ),
+        (
+            spec.actions != "continuous" or n.elbo_batch <= cfg.buffer_size,
             f"naf.elbo_batch ({n.elbo_batch}) must not exceed buffer_size ({cfg.buffer_size})",
         ),
     ]

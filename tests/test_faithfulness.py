@@ -93,9 +93,9 @@ def test_farsighter_targets_use_the_target_torso_and_target_mean(tmp_path: Path)
     agent.head.set_mean(agent.head.mean_AD + 0.3)
     t = minibatch(agent, k=3)
     with torch.no_grad():
-        a_star = (agent.torso(t["next_obs"]) @ agent.head.mean_AD.T).argmax(1)
-        q_tgt = agent.torso_target(t["next_obs"]) @ agent.target_mean_AD.T
-        expected = t["returns"] + t["bootstrap"] * q_tgt.gather(1, a_star[:, None])[:, 0]
+        a_star = (agent.torso(t.next_obs_B) @ agent.head.mean_AD.T).argmax(1)
+        q_tgt = agent.torso_target(t.next_obs_B) @ agent.target_mean_AD.T
+        expected = t.returns_B + t.bootstrap_B * q_tgt.gather(1, a_star[:, None])[:, 0]
     assert torch.allclose(agent._targets(t), expected, atol=1e-5)
 
 
@@ -107,13 +107,13 @@ def test_ddqn_targets_evaluate_with_the_target_network(tmp_path: Path) -> None:
     perturb(agent.q)
     t = minibatch(agent)
     with torch.no_grad():
-        a_star = agent.q(t["next_obs"]).argmax(1)
-        q_tgt = agent.q_target(t["next_obs"]).gather(1, a_star[:, None])[:, 0]
-        wrong = agent.q(t["next_obs"]).max(1).values
-    expected = t["returns"] + t["bootstrap"] * q_tgt
+        a_star = agent.q(t.next_obs_B).argmax(1)
+        q_tgt = agent.q_target(t.next_obs_B).gather(1, a_star[:, None])[:, 0]
+        wrong = agent.q(t.next_obs_B).max(1).values
+    expected = t.returns_B + t.bootstrap_B * q_tgt
     y = agent.targets(t)
     assert torch.allclose(y, expected, atol=1e-5)
-    assert not torch.allclose(y, t["returns"] + t["bootstrap"] * wrong, atol=1e-3)
+    assert not torch.allclose(y, t.returns_B + t.bootstrap_B * wrong, atol=1e-3)
 
 
 def test_naf_targets_use_the_target_value(tmp_path: Path) -> None:
@@ -137,11 +137,11 @@ def test_naf_targets_use_the_target_value(tmp_path: Path) -> None:
     perturb(agent.net)
     t_ = minibatch(agent)
     with torch.no_grad():
-        v_target = agent.net_target.value(t_["next_obs"])
-        v_online = agent.net.value(t_["next_obs"])
+        v_target = agent.net_target.value(t_.next_obs_B)
+        v_online = agent.net.value(t_.next_obs_B)
     y = agent.td_targets(t_)
-    assert torch.allclose(y, t_["returns"] + t_["bootstrap"] * v_target.reshape(-1), atol=1e-5)
-    assert not torch.allclose(y, t_["returns"] + t_["bootstrap"] * v_online.reshape(-1), atol=1e-3)
+    assert torch.allclose(y, t_.returns_B + t_.bootstrap_B * v_target.reshape(-1), atol=1e-5)
+    assert not torch.allclose(y, t_.returns_B + t_.bootstrap_B * v_online.reshape(-1), atol=1e-3)
 
 
 def test_no_k1_sample_starts_at_an_episode_final_row() -> None:
@@ -210,7 +210,7 @@ def test_the_adapted_k_reaches_the_sampler(tmp_path: Path) -> None:
     spy = SpyReplay(agent.replay)
     feed(agent, 300)
     agent.learn(300)  # updates with k = 5, then the refresh moves k to 6
-    assert agent.k == 6
+    assert agent.counters.k == 6
     spy.calls.clear()
     feed(agent, 1, seed=3)
     agent.learn(301)
@@ -236,7 +236,7 @@ def test_bdqn_preset_redraws_at_every_step(tmp_path: Path) -> None:
     agent = cartpole_agent(tmp_path, "bdqn", preset="bdqn", blr__prior_std=10.0)
     obs = np.full((1, 4), 0.3, np.float32)
     actions = [int(agent.act(obs, 10)[0]) for _ in range(200)]
-    assert agent.draws == 200
+    assert agent.counters.draws == 200
     assert len(set(actions)) == 2
 
 
@@ -251,12 +251,12 @@ def test_thompson_target_uses_the_acting_draw(tmp_path: Path) -> None:
     w_AD = agent.w_EAD[0].clone()  # type: ignore[index]
     t = minibatch(agent)
     with torch.no_grad():
-        a_star = (agent.torso(t["next_obs"]) @ w_AD.T).argmax(1)
-        q_tgt = agent.torso_target(t["next_obs"]) @ agent.target_mean_AD.T
-    expected = t["returns"] + t["bootstrap"] * q_tgt.gather(1, a_star[:, None])[:, 0]
-    draws = agent.draws
+        a_star = (agent.torso(t.next_obs_B) @ w_AD.T).argmax(1)
+        q_tgt = agent.torso_target(t.next_obs_B) @ agent.target_mean_AD.T
+    expected = t.returns_B + t.bootstrap_B * q_tgt.gather(1, a_star[:, None])[:, 0]
+    draws = agent.counters.draws
     assert torch.allclose(agent._targets(t), expected, atol=1e-5)
-    assert agent.draws == draws  # the target made no new draw
+    assert agent.counters.draws == draws  # the target made no new draw
 
 
 def test_posterior_max_target_and_uniform_sampling(tmp_path: Path) -> None:
@@ -267,8 +267,8 @@ def test_posterior_max_target_and_uniform_sampling(tmp_path: Path) -> None:
     perturb(agent.torso)
     t = minibatch(agent)
     with torch.no_grad():
-        q_tgt = agent.torso_target(t["next_obs"]) @ agent.target_mean_AD.T
-    expected = t["returns"] + t["bootstrap"] * q_tgt.max(1).values
+        q_tgt = agent.torso_target(t.next_obs_B) @ agent.target_mean_AD.T
+    expected = t.returns_B + t.bootstrap_B * q_tgt.max(1).values
     assert torch.allclose(agent._posterior_targets(t), expected, atol=1e-5)
     e_N, l_N = agent.replay.uniform_indices(5_000, np.random.default_rng(0))
     assert l_N.min() < 20 and l_N.max() > 280  # the whole buffer, not the latest D rows
@@ -289,7 +289,9 @@ def test_draws_count_weight_draws(
     obs = np.zeros((2, 4), np.float32)
     for _ in range(30):
         agent.act(obs, 10)
-    assert agent.draws == expected  # one per environment and draw, none while a draw is held
+    assert (
+        agent.counters.draws == expected
+    )  # one per environment and draw, none while a draw is held
 
 
 # ------------------------------------------------------------------ smaller mismatches (item 5)
@@ -327,7 +329,7 @@ def test_empty_every_refresh_empties_even_when_k_stays(tmp_path: Path) -> None:
     )
     feed(agent, 300)
     agent.refresh_posterior()
-    assert agent.k == 3 and (agent.replay.floor == agent.replay.count).all()
+    assert agent.counters.k == 3 and (agent.replay.floor == agent.replay.count).all()
     other: FarsighterAgent = cartpole_agent(
         tmp_path, "farsighter", k=3, adaptive_k__enabled=True, adaptive_k__k_min=3,
         adaptive_k__k_max=3,

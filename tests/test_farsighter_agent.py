@@ -39,7 +39,7 @@ def test_kstep_draws_a_fresh_sample_at_every_step(tmp_path: Path) -> None:
     agent = make_agent(tmp_path, blr__prior_std=10.0)
     obs = np.zeros((1, 4), np.float32) + 0.3
     actions = [int(agent.act(obs, 10)[0]) for _ in range(200)]
-    assert agent.draws == 200  # Algorithm 2 line 2: one draw per environment step
+    assert agent.counters.draws == 200  # Algorithm 2 line 2: one draw per environment step
     assert len(set(actions)) == 2  # the same state gets different Thompson actions
 
 
@@ -85,11 +85,11 @@ def test_adaptive_k_moves_and_empties_buffer(tmp_path: Path) -> None:
     )
     feed(agent, 600)
     agent.refresh_posterior()
-    assert agent.k == 6  # variance below the target: k += 1
+    assert agent.counters.k == 6  # variance below the target: k += 1
     assert len(agent.replay) > 0 and (agent.replay.floor == agent.replay.count).all()
     feed(agent, 300, seed=1)
     agent.refresh_posterior()
-    assert agent.k == 6  # clamped at k_max
+    assert agent.counters.k == 6  # clamped at k_max
 
     low = make_agent(
         tmp_path,
@@ -101,7 +101,9 @@ def test_adaptive_k_moves_and_empties_buffer(tmp_path: Path) -> None:
     )
     feed(low, 600)
     low.refresh_posterior()
-    assert low.k == 2 and (low.replay.floor == 0).all()  # above the target: k -= 1, buffer kept
+    assert (
+        low.counters.k == 2 and (low.replay.floor == 0).all()
+    )  # above the target: k -= 1, buffer kept
 
 
 def test_incremental_mode_accumulates_update_minibatches(tmp_path: Path) -> None:

@@ -94,18 +94,18 @@ def test_td_target_matches_ops(algo: str) -> None:
     t = agent._sample(64)
     assert t is not None
     with torch.no_grad():
-        v_next = agent.net_target.head.v(agent.net_target.torso(t["next_obs"])).squeeze(-1)
-    expected = naf_td_target(t["returns"], t["bootstrap"], v_next)
+        v_next = agent.net_target.head.v(agent.net_target.torso(t.next_obs_B)).squeeze(-1)
+    expected = naf_td_target(t.returns_B, t.bootstrap_B, v_next)
     assert torch.allclose(agent.td_targets(t), expected)
-    terminal = t["bootstrap"] == 0
-    assert torch.equal(agent.td_targets(t)[terminal], t["returns"][terminal])
+    terminal = t.bootstrap_B == 0
+    assert torch.equal(agent.td_targets(t)[terminal], t.returns_B[terminal])
     # Q of the online network is Eq. 4 with mu at the posterior mean
     with torch.no_grad():
-        phi = agent.net.torso(t["obs"])
+        phi = agent.net.torso(t.obs_B)
         v, l_mat = agent.net.head(phi)
         mu = agent.net.mu_from_out(agent.net.mu_out_mean(phi))
-        q_B, _ = agent.net.q(t["obs"], t["actions"], True)
-        assert torch.allclose(q_B, naf_q(v, mu, l_mat, t["actions"]))
+        q_B, _ = agent.net.q(t.obs_B, t.actions_B, True)
+        assert torch.allclose(q_B, naf_q(v, mu, l_mat, t.actions_B))
 
 
 def test_elbo_update_changes_only_the_mu_layer() -> None:
@@ -122,7 +122,7 @@ def test_elbo_update_changes_only_the_mu_layer() -> None:
     after = params(layer)
     for name in ("weight_mu", "weight_rho", "bias_mu", "bias_rho"):
         assert not torch.equal(mu_before[name], after[name]), name
-    assert np.isfinite(agent.q_variance) and agent.q_variance > 0
+    assert np.isfinite(agent.counters.q_variance) and agent.counters.q_variance > 0
 
 
 def test_td_update_leaves_the_bayesian_mu_layer_and_trains_the_plain_one() -> None:
@@ -164,9 +164,9 @@ def test_learn_cadence_and_adaptive_k() -> None:
     fill(agent)
     metrics = agent.learn(100)
     assert "td_loss" in metrics and "elbo_loss" in metrics
-    assert agent.k == 4 and agent.diagnostics()["k"] == 4.0
+    assert agent.counters.k == 4 and agent.diagnostics()["k"] == 4.0
     assert "elbo_loss" not in agent.learn(101)  # next ELBO update at step 200
-    assert "elbo_loss" in agent.learn(200) and agent.k == 5
+    assert "elbo_loss" in agent.learn(200) and agent.counters.k == 5
     assert set(agent.diagnostics()) >= {"k", "q_variance", "mu_sigma"}
 
 
@@ -177,4 +177,4 @@ def test_state_dict_round_trip() -> None:
     b.load_state_dict(a.state_dict())
     obs = np.ones((1, 3), np.float32)
     assert np.array_equal(a.act(obs, 500), b.act(obs, 500))  # same generator state too
-    assert same(params(a.net), params(b.net)) and a.k == b.k
+    assert same(params(a.net), params(b.net)) and a.counters.k == b.counters.k

@@ -252,9 +252,9 @@ def test_update_moves_every_head_and_walks_the_episode_backward(
         )
     agent.update()
     agent.update()
-    assert agent.cursor == 0 and agent.episodes_learned == 1  # 4 + 4 + 2 rows
+    assert agent.cursor == 0 and agent.counters.episodes_learned == 1  # 4 + 4 + 2 rows
     agent.update()
-    assert agent.episodes_learned == 2  # the next update draws a new episode
+    assert agent.counters.episodes_learned == 2  # the next update draws a new episode
 
 
 def test_one_head_per_episode_and_environment(tmp_path: Path) -> None:
@@ -318,7 +318,9 @@ def test_atari_smoke_with_frame_stacks(tmp_path: Path) -> None:
     summary = farsighter.train(cfg, callbacks=[grab])
     assert summary["global_step"] == 300
     agent = grab.agent
-    assert agent.replay.frame_stack == 4 and agent.episodes_learned >= 1  # life-loss episodes
+    assert (
+        agent.replay.frame_stack == 4 and agent.counters.episodes_learned >= 1
+    )  # life-loss episodes
     assert np.isfinite(agent.diagnostics()["bonus"])
 
 

@@ -2,7 +2,9 @@
 
 from __future__ import annotations
 
-from collections.abc import Iterable
+import dataclasses
+from collections.abc import Iterable, Sequence
+from dataclasses import dataclass
 from typing import Any
 
 import gymnasium as gym
@@ -10,7 +12,8 @@ import numpy as np
 import torch
 from torch import nn
 
-from farsighter.config import Config
+from farsighter.config import AdaptiveKConfig, Config
+from farsighter.ops.adaptive_k import after_refresh
 from farsighter.replay import Batch, ReplayBuffer
 
 
@@ -67,18 +70,34 @@ def obs_tensor(obs: np.ndarray, device: torch.device) -> torch.Tensor:
     return torch.as_tensor(np.asarray(obs), device=device)
 
 
-def batch_tensors(batch: Batch, device: torch.device) -> dict[str, torch.Tensor]:
-    return {
-        "obs": obs_tensor(batch.obs, device),
-        "next_obs": obs_tensor(batch.next_obs, device),
-        "actions": torch.as_tensor(
+@dataclass(frozen=True)
+class TensorBatch:
+    """A k-step minibatch on the device, as the agents receive it (B rows)."""
+
+    obs_B: torch.Tensor
+    """s_t, in the observation's dtype (uint8 frames stay bytes), shape (B, *obs)."""
+    next_obs_B: torch.Tensor
+    """s_{t+n}, where the return bootstraps (n <= k), shape (B, *obs)."""
+    actions_B: torch.Tensor
+    """a_t: int64 (B,) for discrete actions, float32 (B, A) for Box actions."""
+    returns_B: torch.Tensor
+    """sum_{i<n} gamma^i r_{t+i}, shape (B,)."""
+    bootstrap_B: torch.Tensor
+    """gamma^n, or 0 where the episode terminated inside the window, shape (B,)."""
+
+
+def batch_tensors(batch: Batch, device: torch.device) -> TensorBatch:
+    return TensorBatch(
+        obs_B=obs_tensor(batch.obs, device),
+        next_obs_B=obs_tensor(batch.next_obs, device),
+        actions_B=torch.as_tensor(
             batch.actions,
             device=device,
             dtype=torch.int64 if batch.actions.dtype.kind in "iu" else torch.float32,
         ),
-        "returns": torch.as_tensor(batch.returns, device=device),
-        "bootstrap": torch.as_tensor(batch.bootstrap, device=device),
-    }
+        returns_B=torch.as_tensor(batch.returns, device=device),
+        bootstrap_B=torch.as_tensor(batch.bootstrap, device=device),
+    )
 
 
 def td_loss(pred_B: torch.Tensor, target_B: torch.Tensor, kind: str) -> torch.Tensor:
@@ -111,51 +130,113 @@ def sample_minibatch(replay: ReplayBuffer, cfg: Config, batch_size: int, k: int)
     )
 
 
-def updates_due(global_step: int, cfg: Config, done: int) -> int:
+@dataclass
+class Counters:
+    """What an agent counts, checkpointed as a whole (:func:`save_state`): a field added here is
+    saved and restored without further code. ``k`` has its one owner here: the config gives its
+    start value, adaptive k moves it. Agents that count more extend this dataclass."""
+
+    k: int
+    updates: int = 0  # representation updates made (see updates_owed)
+    hold_until: int = 0  # no updates before this global step (refill after a replay-less resume)
+    hold_pending: bool = False  # set on such a resume; the next call of updates_owed starts it
+    target_syncs: int = 0  # target updates made every target_update_every steps
+
+
+def updates_owed(c: Counters, cfg: Config, global_step: int) -> int:
     """Representation updates owed at ``global_step`` (one every ``train_every`` steps after
-    ``learning_starts``), so vectorised environments that advance several steps at once get the
-    same number of updates per environment step as a single one."""
-    if global_step < cfg.learning_starts:
-        return 0
-    total = (global_step - cfg.learning_starts) // cfg.train_every + 1
-    return max(0, total - done)
+    ``learning_starts``), counted as made, so vectorised environments that advance several steps
+    at once get the same number of updates per environment step as a single one.
+
+    After a resume whose checkpoint holds no replay (the ``atari`` preset's default) the agent
+    must refill before it updates: ``hold_pending`` pauses updates for ``learning_starts``
+    environment steps from the first call after it (the warm-up a fresh run gets); the updates
+    that fall in that window are skipped, not made up afterwards."""
+    if c.hold_pending:
+        c.hold_until, c.hold_pending = global_step + cfg.learning_starts, False
+    n = 0
+    if global_step >= cfg.learning_starts:
+        n = max(0, (global_step - cfg.learning_starts) // cfg.train_every + 1 - c.updates)
+    c.updates += n
+    return 0 if global_step < c.hold_until else n
 
 
-class UpdateClock:
-    """Counts the representation updates an agent has made and says how many are owed.
+def crossed(c: Counters, name: str, global_step: int, every: int) -> bool:
+    """True once each time ``global_step`` passes a multiple of ``every``; the counter ``name``
+    records how many multiples have passed (several at once count as one crossing)."""
+    n = global_step // every
+    if n <= getattr(c, name):
+        return False
+    setattr(c, name, n)
+    return True
 
-    After a resume whose checkpoint holds no replay (the ``atari`` preset's default), the agent
-    must refill before it updates: :meth:`hold` pauses updates for ``cfg.learning_starts``
-    environment steps from the first :meth:`due` call after it (the warm-up a fresh run gets); the
-    updates that fall in that window are skipped, not made up afterwards.
-    """
 
-    def __init__(self, cfg: Config) -> None:
-        self.cfg = cfg
-        self.done = 0
-        self.hold_until = 0  # no updates before this global step
-        self._hold_pending = False
+def sync_target(
+    c: Counters, global_step: int, every: int, *pairs: tuple[nn.Module, nn.Module]
+) -> bool:
+    """The hard target copy every N steps (Algorithm 1 line 8): ``target <- online`` for each
+    ``(online, target)`` pair when a multiple of ``every`` was passed; True when it copied."""
+    if not crossed(c, "target_syncs", global_step, every):
+        return False
+    for online, target in pairs:
+        target.load_state_dict(online.state_dict())
+    return True
 
-    def hold(self) -> None:
-        self._hold_pending = True
 
-    def due(self, global_step: int) -> int:
-        """Updates owed now; they are counted as made."""
-        if self._hold_pending:
-            self.hold_until = global_step + self.cfg.learning_starts
-            self._hold_pending = False
-        n = updates_due(global_step, self.cfg, self.done)
-        self.done += n
-        return 0 if global_step < self.hold_until else n
+def adapt_k(c: Counters, q_variance: float, ak: AdaptiveKConfig, replay: ReplayBuffer) -> None:
+    """Algorithm 1 line 7 after a posterior update: move ``c.k`` and empty the replay when asked."""
+    c.k, empty = after_refresh(c.k, q_variance, ak)
+    if empty:
+        replay.clear()
 
-    def state_dict(self) -> dict[str, int]:
-        return {"done": self.done, "hold_until": self.hold_until}
 
-    def load_state_dict(self, state: dict[str, int] | int) -> None:
-        if isinstance(state, int):  # checkpoints before v0.2 stored the count alone
-            self.done, self.hold_until = state, 0
+def save_state(agent: Any, names: Sequence[str], include_replay: bool) -> dict[str, Any]:
+    """An agent's checkpoint: each named attribute in its saved form (modules, optimizers and
+    anything with ``state_dict``; generators' states; dataclasses as dicts; tensors, arrays and
+    plain values as they are), and the replay when asked."""
+    state = {name: _saved(getattr(agent, name)) for name in names}
+    state["replay"] = agent.replay.state_dict() if include_replay else None
+    return state
+
+
+def load_state(agent: Any, names: Sequence[str], state: dict[str, Any]) -> None:
+    """Inverse of :func:`save_state`. A checkpoint saved without its replay makes the agent
+    refill before it updates again (``Counters.hold_pending``)."""
+    for name in names:
+        current, value = getattr(agent, name), state[name]
+        if isinstance(current, np.random.Generator):
+            current.bit_generator.state = value
+        elif isinstance(current, torch.Generator):
+            current.set_state(value)
+        elif dataclasses.is_dataclass(current):
+            for key, item in value.items():
+                setattr(current, key, item)
+        elif hasattr(current, "load_state_dict"):
+            current.load_state_dict(value)
+        elif isinstance(value, torch.Tensor):
+            setattr(agent, name, value.to(agent.device))
+        elif isinstance(value, np.ndarray):
+            setattr(agent, name, value.copy())
         else:
-            self.done, self.hold_until = int(state["done"]), int(state["hold_until"])
+            setattr(agent, name, value)
+    if state.get("replay") is not None:
+        agent.replay.load_state_dict(state["replay"])
+    else:
+        agent.counters.hold_pending = True
+
+
+def _saved(value: Any) -> Any:
+    if isinstance(value, np.random.Generator):
+        return value.bit_generator.state
+    if isinstance(value, torch.Generator):
+        return value.get_state()
+    if dataclasses.is_dataclass(value) and not isinstance(value, type):
+        return dataclasses.asdict(value)
+    if hasattr(value, "state_dict"):
+        return value.state_dict()
+    if isinstance(value, np.ndarray):
+        return value.copy()
+    return value
 
 
 def build_seeded(seed: int, fn: Any) -> Any:

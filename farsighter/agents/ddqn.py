@@ -11,18 +11,24 @@ import numpy as np
 import torch
 
 from farsighter.agents.common import (
-    UpdateClock,
+    Counters,
+    TensorBatch,
     batch_tensors,
     build_seeded,
     clip_and_step,
     epsilon_greedy,
     linear_schedule,
+    load_state,
     make_optimizer,
     make_replay,
     obs_tensor,
     sample_minibatch,
+    save_state,
+    sync_target,
     td_loss,
+    updates_owed,
 )
+from farsighter.agents.protocol import AgentFactory
 from farsighter.config import Config
 from farsighter.networks import QNetwork
 from farsighter.ops.targets import double_q_target
@@ -51,8 +57,7 @@ class DDQNAgent:
         self.opt = make_optimizer(self.q.parameters(), cfg)
         self.replay = make_replay(cfg, obs_space, frame_stack, seed=cfg.seed + 1)
         self.rng = np.random.default_rng(cfg.seed + 2)
-        self.clock = UpdateClock(cfg)  # updates made; refill hold after resume
-        self.target_syncs = 0
+        self.counters = Counters(k=cfg.k)
         self.epsilon = cfg.eps_start
 
     # ------------------------------------------------------------------ acting
@@ -90,59 +95,43 @@ class DDQNAgent:
     # ------------------------------------------------------------------ learning
     def learn(self, global_step: int) -> dict[str, torch.Tensor]:
         metrics: dict[str, torch.Tensor] = {}
-        for _ in range(self.clock.due(global_step)):
+        for _ in range(updates_owed(self.counters, self.cfg, global_step)):
             metrics["td_loss"] = self.update()
-        syncs = global_step // self.cfg.target_update_every
-        if syncs > self.target_syncs:
-            self.q_target.load_state_dict(self.q.state_dict())
-            self.target_syncs = syncs
+        sync_target(
+            self.counters, global_step, self.cfg.target_update_every, (self.q, self.q_target)
+        )
         return metrics
 
     def update(self) -> torch.Tensor:
         """One gradient step on the double-Q loss of a k-step minibatch; returns the loss."""
         cfg = self.cfg
-        batch = sample_minibatch(self.replay, cfg, cfg.batch_size, cfg.k)
+        batch = sample_minibatch(self.replay, cfg, cfg.batch_size, self.counters.k)
         t = batch_tensors(batch, self.device)
-        q_B = self.q(t["obs"]).gather(1, t["actions"].unsqueeze(1)).squeeze(1)
+        q_B = self.q(t.obs_B).gather(1, t.actions_B.unsqueeze(1)).squeeze(1)
         y_B = self.targets(t)
         loss = td_loss(q_B, y_B, self.cfg.loss)
         clip_and_step(loss, list(self.q.parameters()), self.opt, cfg.max_grad_norm)
         return loss.detach()
 
     @torch.no_grad()
-    def targets(self, t: dict[str, torch.Tensor]) -> torch.Tensor:
+    def targets(self, t: TensorBatch) -> torch.Tensor:
         """Double-Q target (Eq. 2 with k-step returns): the online network picks the argmax at
         s_{t+n}, the target network evaluates it."""
         return double_q_target(
-            t["returns"], t["bootstrap"], self.q(t["next_obs"]), self.q_target(t["next_obs"])
+            t.returns_B, t.bootstrap_B, self.q(t.next_obs_B), self.q_target(t.next_obs_B)
         )
 
     def diagnostics(self) -> dict[str, float]:
-        return {"epsilon": self.epsilon, "k": float(self.cfg.k)}
+        return {"epsilon": self.epsilon, "k": float(self.counters.k)}
 
     # ------------------------------------------------------------------ checkpoints
+    SAVED = ("q", "q_target", "opt", "rng", "counters")
+
     def state_dict(self, include_replay: bool = True) -> dict[str, Any]:
-        return {
-            "q": self.q.state_dict(),
-            "q_target": self.q_target.state_dict(),
-            "opt": self.opt.state_dict(),
-            "rng": self.rng.bit_generator.state,
-            "counters": {"updates": self.clock.state_dict(), "target_syncs": self.target_syncs},
-            "replay": self.replay.state_dict() if include_replay else None,
-        }
+        return save_state(self, self.SAVED, include_replay)
 
     def load_state_dict(self, state: dict[str, Any]) -> None:
-        self.q.load_state_dict(state["q"])
-        self.q_target.load_state_dict(state["q_target"])
-        self.opt.load_state_dict(state["opt"])
-        self.rng.bit_generator.state = state["rng"]
-        self.clock.load_state_dict(state["counters"]["updates"])
-        self.target_syncs = state["counters"]["target_syncs"]
-        if state.get("replay") is not None:
-            self.replay.load_state_dict(state["replay"])
-        else:  # saved without its replay: refill before updating again
-            self.clock.hold()
+        load_state(self, self.SAVED, state)
 
-    def load_policy(self, state: dict[str, Any]) -> None:
-        """Weights only (for acting from a finished run)."""
-        self.q.load_state_dict(state["q"])
+
+AGENT: AgentFactory = DDQNAgent  # the class farsighter.algorithms names; mypy checks the protocol

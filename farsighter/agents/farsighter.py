@@ -23,6 +23,7 @@ Q(s, a) = phi_theta(s)^T w_a with a Bayesian linear regression posterior over ea
 from __future__ import annotations
 
 import copy
+from dataclasses import dataclass
 from typing import Any
 
 import gymnasium as gym
@@ -31,24 +32,39 @@ import torch
 from torch import nn
 
 from farsighter.agents.common import (
-    UpdateClock,
+    Counters,
+    TensorBatch,
+    adapt_k,
     batch_tensors,
     build_seeded,
     clip_and_step,
+    crossed,
+    load_state,
     make_optimizer,
     make_replay,
     obs_tensor,
     sample_minibatch,
+    save_state,
+    sync_target,
     td_loss,
+    updates_owed,
 )
+from farsighter.agents.protocol import AgentFactory
 from farsighter.config import Config
 from farsighter.networks import make_torso
-from farsighter.ops.adaptive_k import after_refresh
 from farsighter.ops.blr import BLRHead, greedy_predictive_variance
 from farsighter.ops.targets import double_q_target
 from farsighter.replay import Batch
 
 FEATURE_CHUNK = 4_096  # rows per forward pass when computing features for a posterior refresh
+
+
+@dataclass
+class FarsighterCounters(Counters):
+    refreshes: int = 0  # posterior refreshes made (every M steps)
+    draws: int = 0  # Thompson draws made (one per environment and acting step with redraw=step)
+    steps_since_draw: int = 0  # acting steps since the held draw (redraw = every)
+    q_variance: float = float("nan")  # at the latest refresh (adaptive k's signal)
 
 
 class FarsighterAgent:
@@ -94,18 +110,12 @@ class FarsighterAgent:
         self.gen = torch.Generator(device=device)
         self.gen.manual_seed(cfg.seed + 3)
 
-        self.k = cfg.k
-        self.clock = UpdateClock(cfg)  # updates made; refill hold after resume
-        self.target_syncs = 0
-        self.refreshes = 0
-        self.draws = 0  # Thompson draws made (one per acting step with redraw=step)
-        self.q_variance = float("nan")
+        self.counters = FarsighterCounters(k=cfg.k)
         # Incremental mode: recent minibatch features, for the Q-variance of adaptive k.
         self.recent_phi: torch.Tensor | None = None
         # Per-environment weight draws for redraw = every / episode.
         self.w_EAD: torch.Tensor | None = None
         self.redraw_E = np.ones(cfg.num_envs, dtype=bool)
-        self.steps_since_draw = 0
 
     # ------------------------------------------------------------------ acting
     def act(self, obs_E: np.ndarray, global_step: int, explore: bool = True) -> np.ndarray:
@@ -121,29 +131,29 @@ class FarsighterAgent:
         return q_EA.argmax(dim=1).cpu().numpy()
 
     def _thompson_q(self, phi_ED: torch.Tensor) -> torch.Tensor:
-        blr = self.cfg.blr
+        blr, c = self.cfg.blr, self.counters
         n = phi_ED.shape[0]
         if blr.redraw == "step" and blr.target != "thompson":
             # Algorithm 2 line 2: a fresh z at every step, without forming weight matrices.
-            self.draws += n
+            c.draws += n
             return self.head.q_sample(phi_ED, generator=self.gen)
         # Held draws; with blr.target = thompson the Q-loss reuses the acting draw, so a per-step
         # draw is also made explicit here.
         if blr.redraw == "step":
             self.redraw_E[:] = True
         elif blr.redraw == "every":
-            if self.w_EAD is None or self.steps_since_draw >= blr.redraw_every:
+            if self.w_EAD is None or c.steps_since_draw >= blr.redraw_every:
                 self.redraw_E[:] = True
-                self.steps_since_draw = 0
-            self.steps_since_draw += 1
+                c.steps_since_draw = 0
+            c.steps_since_draw += 1
         if self.w_EAD is None or self.w_EAD.shape[0] != n:
             self.w_EAD = self.head.sample_weights(n, generator=self.gen)
-            self.draws += n
+            c.draws += n
             self.redraw_E[:] = False
         elif self.redraw_E.any():
             idx = np.flatnonzero(self.redraw_E)
             self.w_EAD[idx] = self.head.sample_weights(len(idx), generator=self.gen)
-            self.draws += len(idx)
+            c.draws += len(idx)
             self.redraw_E[:] = False
         return torch.einsum("ed,ead->ea", phi_ED, self.w_EAD)
 
@@ -152,7 +162,7 @@ class FarsighterAgent:
         the BDQN code's Q-loss takes its argmax under the one draw it acts with."""
         if self.w_EAD is None:  # no Thompson action yet (uniform warm-up): draw as the code does
             self.w_EAD = self.head.sample_weights(self.cfg.num_envs, generator=self.gen)
-            self.draws += self.cfg.num_envs
+            self.counters.draws += self.cfg.num_envs
             self.redraw_E[:] = False
         return self.w_EAD[0]
 
@@ -178,54 +188,51 @@ class FarsighterAgent:
 
     # ------------------------------------------------------------------ learning
     def learn(self, global_step: int) -> dict[str, torch.Tensor]:
-        cfg = self.cfg
+        cfg, c = self.cfg, self.counters
         metrics: dict[str, torch.Tensor] = {}
-        for _ in range(self.clock.due(global_step)):
+        for _ in range(updates_owed(c, cfg, global_step)):
             loss = self.update()
             if loss is not None:
                 metrics["td_loss"] = loss
         # Algorithm 1's order: the posterior refresh (line 6) comes before the target copy
         # (line 8), so on a step where both fall the target mean is the fresh posterior mean
         # (the BDQN code also sets E_W_target = E_W right after its regression).
-        refreshes = global_step // cfg.blr.posterior_every
-        if refreshes > self.refreshes and global_step >= cfg.learning_starts:
-            self.refreshes = refreshes
+        if global_step >= cfg.learning_starts and crossed(
+            c, "refreshes", global_step, cfg.blr.posterior_every
+        ):
             self.refresh_posterior()
-        syncs = global_step // cfg.target_update_every
-        if syncs > self.target_syncs:  # Algorithm 1 line 8
-            self.torso_target.load_state_dict(self.torso.state_dict())
-            self.target_mean_AD = self.head.mean_AD.clone()
-            self.target_syncs = syncs
+        if sync_target(c, global_step, cfg.target_update_every, (self.torso, self.torso_target)):
+            self.target_mean_AD = self.head.mean_AD.clone()  # Algorithm 1 line 8
         return metrics
 
     def _sample(self) -> Batch | None:
         cfg = self.cfg
         try:
-            return sample_minibatch(self.replay, cfg, cfg.batch_size, self.k)
+            return sample_minibatch(self.replay, cfg, cfg.batch_size, self.counters.k)
         except ValueError:  # not enough complete k-step windows yet
             return None
 
     @torch.no_grad()
-    def _targets(self, t: dict[str, torch.Tensor]) -> torch.Tensor:
+    def _targets(self, t: TensorBatch) -> torch.Tensor:
         """y = r^k + gamma^k phi_target(s')^T mean_target[a*] (Eq. 8 with k-step returns).
 
         a* is the argmax under the online features and the posterior mean (Eq. 8), or under the
         latest acting Thompson draw when ``blr.target = thompson`` (the BDQN authors' code)."""
-        phi_next = self.torso(t["next_obs"])
+        phi_next = self.torso(t.next_obs_B)
         thompson = self.cfg.blr.target == "thompson"
         w_online_AD = self._acting_draw() if thompson else self.head.mean_AD
         q_next_online = phi_next @ w_online_AD.T
-        q_next_target = self.torso_target(t["next_obs"]) @ self.target_mean_AD.T
-        return double_q_target(t["returns"], t["bootstrap"], q_next_online, q_next_target)
+        q_next_target = self.torso_target(t.next_obs_B) @ self.target_mean_AD.T
+        return double_q_target(t.returns_B, t.bootstrap_B, q_next_online, q_next_target)
 
     @torch.no_grad()
-    def _posterior_targets(self, t: dict[str, torch.Tensor]) -> torch.Tensor:
+    def _posterior_targets(self, t: TensorBatch) -> torch.Tensor:
         """Regression targets of a posterior refresh: Eq. 8's (``blr.posterior_target = double``)
         or y = r^k + gamma^k max_a phi_target(s')^T mean_target_a (``max``, the BDQN code)."""
         if self.cfg.blr.posterior_target == "double":
             return self._targets(t)
-        q_next_target = self.torso_target(t["next_obs"]) @ self.target_mean_AD.T
-        return t["returns"] + t["bootstrap"] * q_next_target.max(dim=1).values
+        q_next_target = self.torso_target(t.next_obs_B) @ self.target_mean_AD.T
+        return t.returns_B + t.bootstrap_B * q_next_target.max(dim=1).values
 
     def update(self) -> torch.Tensor | None:
         """One step on theta with w at the posterior mean (Eq. 8); the BLR weights stay fixed."""
@@ -234,14 +241,14 @@ class FarsighterAgent:
             return None
         t = batch_tensors(batch, self.device)
         y_B = self._targets(t)
-        phi_BD = self.torso(t["obs"])
-        q_B = (phi_BD @ self.head.mean_AD.T).gather(1, t["actions"][:, None])[:, 0]
+        phi_BD = self.torso(t.obs_B)
+        q_B = (phi_BD @ self.head.mean_AD.T).gather(1, t.actions_B[:, None])[:, 0]
         loss = td_loss(q_B, y_B, self.cfg.loss)
         clip_and_step(loss, list(self.torso.parameters()), self.opt, self.cfg.max_grad_norm)
         if self.cfg.blr.mode == "incremental":
             double = self.cfg.blr.posterior_target == "double"
             y_post_B = y_B if double else self._posterior_targets(t)
-            self._accumulate(phi_BD.detach(), t["actions"], y_post_B)
+            self._accumulate(phi_BD.detach(), t.actions_B, y_post_B)
         return loss.detach()
 
     def _accumulate(self, phi_BD: torch.Tensor, a_B: torch.Tensor, y_B: torch.Tensor) -> None:
@@ -264,15 +271,15 @@ class FarsighterAgent:
             part = self.replay.sample_indices(
                 e_N[lo : lo + FEATURE_CHUNK],
                 l_N[lo : lo + FEATURE_CHUNK],
-                self.k,
+                self.counters.k,
                 self.cfg.gamma,
-                stride=self.k if self.cfg.stride else 1,  # Algorithm 1 stores one tuple per k
+                stride=self.counters.k if self.cfg.stride else 1,  # Algorithm 1: one tuple per k
             )
             if len(part.actions) == 0:
                 continue
             t = batch_tensors(part, self.device)
-            phis.append(self.torso(t["obs"]))
-            actions.append(t["actions"])
+            phis.append(self.torso(t.obs_B))
+            actions.append(t.actions_B)
             ys.append(self._posterior_targets(t))
         if not phis:
             empty = torch.zeros(0, device=self.device)
@@ -287,7 +294,7 @@ class FarsighterAgent:
             if cfg.blr.posterior_sampling == "uniform":  # the BDQN code: whole buffer, replaced
                 e_N, l_N = self.replay.uniform_indices(d, self.rng)
             else:  # the latest D tuples; with stride one is stored per k steps, so k D rows
-                e_N, l_N = self.replay.recent_indices(d * (self.k if cfg.stride else 1))
+                e_N, l_N = self.replay.recent_indices(d * (self.counters.k if cfg.stride else 1))
             phi_ND, a_N, y_N = self._features_and_targets(e_N, l_N)
             if len(a_N) == 0:
                 return
@@ -297,62 +304,39 @@ class FarsighterAgent:
                 return
             self.head.refresh()
             phi_ND = self.recent_phi
-        self.q_variance = greedy_predictive_variance(self.head, phi_ND)
-        # Algorithm 1 line 7 after each posterior update
-        self.k, empty = after_refresh(self.k, self.q_variance, cfg.adaptive_k)
-        if empty:
-            self.replay.clear()
+        self.counters.q_variance = greedy_predictive_variance(self.head, phi_ND)
+        adapt_k(self.counters, self.counters.q_variance, cfg.adaptive_k, self.replay)
 
     def diagnostics(self) -> dict[str, float]:
         return {
-            "k": float(self.k),
-            "q_variance": self.q_variance,
+            "k": float(self.counters.k),
+            "q_variance": self.counters.q_variance,
             "posterior_refreshes": float(self.head.num_refreshes),
             "jitter_events": float(self.head.jitter_events),
         }
 
     # ------------------------------------------------------------------ checkpoints
+    SAVED = (
+        "torso",
+        "torso_target",
+        "head",
+        "target_mean_AD",
+        "opt",
+        "rng",
+        "gen",
+        "w_EAD",
+        "redraw_E",
+        "recent_phi",
+        "counters",
+    )
+
     def state_dict(self, include_replay: bool = True) -> dict[str, Any]:
-        return {
-            "torso": self.torso.state_dict(),
-            "torso_target": self.torso_target.state_dict(),
-            "head": self.head.state_dict(),
-            "target_mean": self.target_mean_AD,
-            "opt": self.opt.state_dict(),
-            "rng": self.rng.bit_generator.state,
-            "gen": self.gen.get_state(),
-            "w": self.w_EAD,
-            "counters": {
-                "k": self.k,
-                "updates": self.clock.state_dict(),
-                "target_syncs": self.target_syncs,
-                "refreshes": self.refreshes,
-                "draws": self.draws,
-                "q_variance": self.q_variance,
-                "steps_since_draw": self.steps_since_draw,
-                "redraw": self.redraw_E.copy(),
-                "recent_phi": self.recent_phi,
-            },
-            "replay": self.replay.state_dict() if include_replay else None,
-        }
+        return save_state(self, self.SAVED, include_replay)
 
     def load_state_dict(self, state: dict[str, Any]) -> None:
-        self.torso.load_state_dict(state["torso"])
-        self.torso_target.load_state_dict(state["torso_target"])
-        self.head.load_state_dict(state["head"])
-        self.target_mean_AD = state["target_mean"].to(self.device)
-        self.opt.load_state_dict(state["opt"])
-        self.rng.bit_generator.state = state["rng"]
-        self.gen.set_state(state["gen"])
-        self.w_EAD = state["w"]
-        c = state["counters"]
-        self.k, self.target_syncs = c["k"], c["target_syncs"]
-        self.clock.load_state_dict(c["updates"])
-        self.refreshes, self.draws, self.q_variance = c["refreshes"], c["draws"], c["q_variance"]
-        self.steps_since_draw = c["steps_since_draw"]
-        self.redraw_E[...] = c["redraw"]
-        self.recent_phi = c["recent_phi"]
-        if state.get("replay") is not None:
-            self.replay.load_state_dict(state["replay"])
-        else:  # saved without its replay: refill before updating again
-            self.clock.hold()
+        load_state(self, self.SAVED, state)
+
+
+AGENT: AgentFactory = (
+    FarsighterAgent  # the class farsighter.algorithms names; mypy checks the protocol
+)

@@ -44,6 +44,7 @@ clamp left P stuck at its floor once crossed) fixed it.
 from __future__ import annotations
 
 import copy
+from dataclasses import dataclass
 from functools import partial
 from typing import Any
 
@@ -53,25 +54,30 @@ import torch
 import torch.nn.functional as F
 from torch import nn
 
+from farsighter import algorithms
 from farsighter.agents.common import (
-    UpdateClock,
+    Counters,
+    TensorBatch,
+    adapt_k,
     batch_tensors,
     build_seeded,
     clip_and_step,
+    crossed,
+    load_state,
     make_optimizer,
     make_replay,
     obs_tensor,
     sample_minibatch,
+    save_state,
     td_loss,
+    updates_owed,
 )
+from farsighter.agents.protocol import AgentFactory
 from farsighter.config import Config
 from farsighter.errors import ConfigError
 from farsighter.networks import MLPTorso
-from farsighter.ops.adaptive_k import after_refresh
 from farsighter.ops.bayes_layer import BayesianLinear, elbo_terms
 from farsighter.ops.naf import NAFHead, naf_q, naf_td_target, scale_action
-
-BAYESIAN_ALGOS = ("bnaf", "farsighter-naf")
 
 
 class NAFNetwork(nn.Module):
@@ -135,6 +141,16 @@ class NAFNetwork(nn.Module):
         return naf_q(v_B, self.mu_from_out(out_BA), l_BAA, action_BA), out_BA
 
 
+@dataclass
+class NAFCounters(Counters):
+    td_steps: int = 0  # TD updates made
+    elbo_rounds: int = 0  # ELBO updates of the mu-layer posterior (every M steps)
+    draws: int = 0  # weight draws made for acting (one per step)
+    q_variance: float = float("nan")  # mu-layer output variance at the latest ELBO update
+    elbo_nll: float = float("nan")
+    elbo_kl: float = float("nan")
+
+
 @torch.no_grad()
 def soft_update(target: nn.Module, online: nn.Module, tau: float) -> None:
     """theta' <- tau theta + (1 - tau) theta' (Algorithm 3 line 11)."""
@@ -160,7 +176,7 @@ class NAFAgent:
             )
         self.cfg = cfg
         self.device = device
-        self.bayesian = cfg.algo in BAYESIAN_ALGOS
+        self.bayesian = algorithms.get(cfg.algo).bayesian
         n = cfg.naf
         self.low_A = np.asarray(act_space.low, dtype=np.float32)
         self.high_A = np.asarray(act_space.high, dtype=np.float32)
@@ -206,15 +222,7 @@ class NAFAgent:
             self.her = goal_spec(cfg)
         self.ou_EA = np.zeros((cfg.num_envs, self.action_dim), dtype=np.float64)
 
-        self.k = cfg.k
-        self.clock = UpdateClock(cfg)  # updates made; refill hold after resume
-        self.target_syncs = 0  # soft target updates made with naf.soft_update = every_n
-        self.td_steps = 0
-        self.elbo_rounds = 0
-        self.draws = 0  # weight draws made for acting (one per step)
-        self.q_variance = float("nan")
-        self.elbo_nll = float("nan")
-        self.elbo_kl = float("nan")
+        self.counters = NAFCounters(k=cfg.k)
 
     # ------------------------------------------------------------------ acting
     def act(self, obs_E: np.ndarray, global_step: int, explore: bool = True) -> np.ndarray:
@@ -232,7 +240,7 @@ class NAFAgent:
                 # Algorithm 2 line 2 / Algorithm 3 line 4: a fresh theta^a ~ q every step.
                 w_EOI, b_EO = self.net.mu_layer.sample_weights_batch(n, generator=self.gen)
                 out_EA = BayesianLinear.forward_with_batch(phi_ED, w_EOI, b_EO)
-                self.draws += 1
+                self.counters.draws += 1
             else:
                 out_EA = self.net.mu_out_mean(phi_ED)
             action_EA = self.net.mu_from_out(out_EA).cpu().numpy()
@@ -278,30 +286,30 @@ class NAFAgent:
 
     # ------------------------------------------------------------------ learning
     def learn(self, global_step: int) -> dict[str, torch.Tensor]:
-        cfg = self.cfg
+        cfg, c = self.cfg, self.counters
         metrics: dict[str, torch.Tensor] = {}
-        for _ in range(self.clock.due(global_step)):
+        for _ in range(updates_owed(c, cfg, global_step)):
             for _ in range(cfg.naf.updates_per_step):
                 loss = self.update()
                 if loss is not None:
                     metrics["td_loss"] = loss
-        syncs = global_step // cfg.target_update_every
-        if cfg.naf.soft_update == "every_n" and syncs > self.target_syncs:
+        if cfg.naf.soft_update == "every_n" and crossed(
+            c, "target_syncs", global_step, cfg.target_update_every
+        ):
             soft_update(self.net_target, self.net, cfg.naf.tau)  # Algorithm 3 line 11, literally
-            self.target_syncs = syncs
         if self.bayesian:
-            rounds = global_step // cfg.naf.elbo_every
-            if rounds > self.elbo_rounds and global_step >= cfg.learning_starts:
-                self.elbo_rounds = rounds
+            if global_step >= cfg.learning_starts and crossed(
+                c, "elbo_rounds", global_step, cfg.naf.elbo_every
+            ):
                 elbo = self.elbo_update()
                 if elbo is not None:
                     metrics["elbo_loss"] = elbo
         return metrics
 
-    def _sample(self, batch_size: int) -> dict[str, torch.Tensor] | None:
+    def _sample(self, batch_size: int) -> TensorBatch | None:
         cfg = self.cfg
         try:
-            batch = sample_minibatch(self.replay, cfg, batch_size, self.k)
+            batch = sample_minibatch(self.replay, cfg, batch_size, self.counters.k)
         except ValueError:  # not enough complete k-step windows yet (or the replay was emptied)
             return None
         if self.her is not None:
@@ -311,7 +319,7 @@ class NAFAgent:
                 batch,
                 self.replay,
                 self.her,
-                k=self.k,
+                k=self.counters.k,
                 gamma=cfg.gamma,
                 ratio=cfg.naf.her_ratio,
                 rng=self.rng,
@@ -319,9 +327,9 @@ class NAFAgent:
         return batch_tensors(batch, self.device)
 
     @torch.no_grad()
-    def td_targets(self, t: dict[str, torch.Tensor]) -> torch.Tensor:
+    def td_targets(self, t: TensorBatch) -> torch.Tensor:
         """y = r^k + gamma^n (1 - terminal) V'(s_{t+n}) from the target network."""
-        return naf_td_target(t["returns"], t["bootstrap"], self.net_target.value(t["next_obs"]))
+        return naf_td_target(t.returns_B, t.bootstrap_B, self.net_target.value(t.next_obs_B))
 
     def update(self) -> torch.Tensor | None:
         """One TD step on theta, theta_V, theta_P (+ the plain mu-layer), then the soft target
@@ -330,14 +338,14 @@ class NAFAgent:
         if t is None:
             return None
         y_B = self.td_targets(t)
-        q_B, out_BA = self.net.q(t["obs"], t["actions"], freeze_mu=self.bayesian)
+        q_B, out_BA = self.net.q(t.obs_B, t.actions_B, freeze_mu=self.bayesian)
         loss = td_loss(q_B, y_B, self.cfg.loss)
         if not self.bayesian:  # keep tanh(mu) out of saturation (NAFConfig.mu_penalty)
             loss = loss + self.cfg.naf.mu_penalty * out_BA.pow(2).mean()
         clip_and_step(loss, self.td_params, self.opt, self.cfg.max_grad_norm)
         if self.cfg.naf.soft_update == "every_update":
             soft_update(self.net_target, self.net, self.cfg.naf.tau)
-        self.td_steps += 1
+        self.counters.td_steps += 1
         return loss.detach()
 
     def elbo_update(self) -> torch.Tensor | None:
@@ -366,13 +374,13 @@ class NAFAgent:
                 break
             with torch.no_grad():
                 y_B = self.td_targets(t)
-                phi_BD = self.net.torso(t["obs"])
+                phi_BD = self.net.torso(t.obs_B)
                 v_B, l_BAA = self.net.head(phi_BD)
             # predict_fn(out) = Q(s_i, a_i | mu = scale(tanh(out))) with V and P frozen.
             terms = elbo_terms(
                 layer,
                 phi_BD,
-                partial(self._q_at, v_B, l_BAA, t["actions"]),
+                partial(self._q_at, v_B, l_BAA, t.actions_B),
                 y_B,
                 naf.noise_std_eps,
                 num_data,
@@ -384,15 +392,13 @@ class NAFAgent:
             total = terms.loss + naf.mu_penalty * mean_out_BA.pow(2).mean()
             clip_and_step(total, list(layer.parameters()), self.elbo_opt, cfg.max_grad_norm)
             loss = terms.loss.detach()
-            self.elbo_nll, self.elbo_kl = float(terms.nll.detach()), float(terms.kl.detach())
+            self.counters.elbo_nll = float(terms.nll.detach())
+            self.counters.elbo_kl = float(terms.kl.detach())
         if phi_BD is None:
             return None
         with torch.no_grad():
-            self.q_variance = float(layer.output_mean_var(phi_BD)[1].mean())
-        # Algorithm 1 line 7 after each posterior update
-        self.k, empty = after_refresh(self.k, self.q_variance, cfg.adaptive_k)
-        if empty:
-            self.replay.clear()
+            self.counters.q_variance = float(layer.output_mean_var(phi_BD)[1].mean())
+        adapt_k(self.counters, self.counters.q_variance, cfg.adaptive_k, self.replay)
         return loss
 
     def _q_at(
@@ -402,61 +408,26 @@ class NAFAgent:
         return naf_q(v_B, self.net.mu_from_out(out_BA), l_BAA, action_BA)
 
     def diagnostics(self) -> dict[str, float]:
-        out = {"k": float(self.k)}
+        c = self.counters
+        out = {"k": float(c.k)}
         if isinstance(self.net.mu_layer, BayesianLinear):
             out.update(
-                q_variance=self.q_variance,
+                q_variance=c.q_variance,
                 mu_sigma=float(self.net.mu_layer.weight_sigma.detach().mean()),
-                elbo_nll=self.elbo_nll,
-                elbo_kl=self.elbo_kl,
-                elbo_updates=float(self.elbo_rounds),
+                elbo_nll=c.elbo_nll,
+                elbo_kl=c.elbo_kl,
+                elbo_updates=float(c.elbo_rounds),
             )
         return out
 
     # ------------------------------------------------------------------ checkpoints
+    SAVED = ("net", "net_target", "opt", "elbo_opt", "rng", "gen", "ou_EA", "counters")
+
     def state_dict(self, include_replay: bool = True) -> dict[str, Any]:
-        return {
-            "net": self.net.state_dict(),
-            "net_target": self.net_target.state_dict(),
-            "opt": self.opt.state_dict(),
-            "elbo_opt": None if self.elbo_opt is None else self.elbo_opt.state_dict(),
-            "rng": self.rng.bit_generator.state,
-            "gen": self.gen.get_state(),
-            "ou": self.ou_EA.copy(),
-            "counters": {
-                "k": self.k,
-                "updates": self.clock.state_dict(),
-                "target_syncs": self.target_syncs,
-                "td_steps": self.td_steps,
-                "elbo_rounds": self.elbo_rounds,
-                "draws": self.draws,
-                "q_variance": self.q_variance,
-                "elbo_nll": self.elbo_nll,
-                "elbo_kl": self.elbo_kl,
-            },
-            "replay": self.replay.state_dict() if include_replay else None,
-        }
+        return save_state(self, self.SAVED, include_replay)
 
     def load_state_dict(self, state: dict[str, Any]) -> None:
-        self.net.load_state_dict(state["net"])
-        self.net_target.load_state_dict(state["net_target"])
-        self.opt.load_state_dict(state["opt"])
-        if self.elbo_opt is not None and state["elbo_opt"] is not None:
-            self.elbo_opt.load_state_dict(state["elbo_opt"])
-        self.rng.bit_generator.state = state["rng"]
-        self.gen.set_state(state["gen"])
-        self.ou_EA = np.array(state["ou"])
-        c = state["counters"]
-        self.k, self.td_steps = c["k"], c["td_steps"]
-        self.target_syncs = c.get("target_syncs", 0)
-        self.clock.load_state_dict(c["updates"])
-        self.elbo_rounds, self.draws, self.q_variance = (
-            c["elbo_rounds"],
-            c["draws"],
-            c["q_variance"],
-        )
-        self.elbo_nll, self.elbo_kl = c["elbo_nll"], c["elbo_kl"]
-        if state.get("replay") is not None:
-            self.replay.load_state_dict(state["replay"])
-        else:  # saved without its replay: refill before updating again
-            self.clock.hold()
+        load_state(self, self.SAVED, state)
+
+
+AGENT: AgentFactory = NAFAgent  # the class farsighter.algorithms names; mypy checks the protocol

@@ -38,6 +38,7 @@ from __future__ import annotations
 
 import copy
 import math
+from dataclasses import dataclass
 from typing import Any
 
 import gymnasium as gym
@@ -46,17 +47,22 @@ import torch
 from torch import nn
 
 from farsighter.agents.common import (
+    Counters,
     RunningMeanStd,
-    UpdateClock,
     build_seeded,
     clip_and_step,
     epsilon_greedy,
     linear_schedule,
+    load_state,
     make_optimizer,
     make_replay,
     obs_tensor,
+    save_state,
+    sync_target,
     td_loss,
+    updates_owed,
 )
+from farsighter.agents.protocol import AgentFactory
 from farsighter.config import Config
 from farsighter.networks import make_torso, make_trunk
 from farsighter.replay import Episode
@@ -177,6 +183,11 @@ def backward_targets(
     return y_TK.astype(np.float32)
 
 
+@dataclass
+class OB2ICounters(Counters):
+    episodes_learned: int = 0  # episodes whose backward targets were computed
+
+
 class OB2IAgent:
     """Bootstrapped heads with UCB-bonus and episodic backward update (module docstring)."""
 
@@ -210,9 +221,7 @@ class OB2IAgent:
         self.head_E = self.rng.integers(0, self.num_heads, size=cfg.num_envs)
         self.next_bonus_rms = RunningMeanStd()
         self.reward_bonus_rms = RunningMeanStd()
-        self.clock = UpdateClock(cfg)  # updates made; refill hold after resume
-        self.target_syncs = 0
-        self.episodes_learned = 0
+        self.counters = OB2ICounters(k=cfg.k)
         self.epsilon = cfg.eps_start
         # The episode being learned from: targets y (T, K), consumed backward from ``cursor``.
         self.episode: Episode | None = None
@@ -277,14 +286,14 @@ class OB2IAgent:
     # ------------------------------------------------------------------ learning
     def learn(self, global_step: int) -> dict[str, torch.Tensor]:
         metrics: dict[str, torch.Tensor] = {}
-        for _ in range(self.clock.due(global_step)):  # skipped while no episode is complete
+        # skipped while no episode is complete
+        for _ in range(updates_owed(self.counters, self.cfg, global_step)):
             loss = self.update()
             if loss is not None:
                 metrics["td_loss"] = loss
-        syncs = global_step // self.cfg.target_update_every
-        if syncs > self.target_syncs:
-            self.q_target.load_state_dict(self.q.state_dict())
-            self.target_syncs = syncs
+        sync_target(
+            self.counters, global_step, self.cfg.target_update_every, (self.q, self.q_target)
+        )
         return metrics
 
     def _obs(self, env: int, rows: np.ndarray) -> torch.Tensor:
@@ -331,7 +340,7 @@ class OB2IAgent:
             except ValueError:  # no complete episode yet
                 return None
             self.episode, self.y_TK, self.cursor = ep, self.episode_targets(ep), ep.length
-            self.episodes_learned += 1
+            self.counters.episodes_learned += 1
         hi = self.cursor
         lo = max(0, hi - self.cfg.batch_size)
         rows = ep.start + np.arange(lo, hi, dtype=np.int64)
@@ -351,54 +360,40 @@ class OB2IAgent:
             "bonus_reward": self.stats["bonus_reward"],
             "bonus_next": self.stats["bonus_next"],
             "q_variance": self.stats["q_variance"],
-            "episodes_learned": float(self.episodes_learned),
+            "episodes_learned": float(self.counters.episodes_learned),
         }
 
     # ------------------------------------------------------------------ checkpoints
+    SAVED = (
+        "q",
+        "q_target",
+        "opt",
+        "rng",
+        "head_E",
+        "next_bonus_rms",
+        "reward_bonus_rms",
+        "epsilon",
+        "stats",
+        "counters",
+    )
+
     def state_dict(self, include_replay: bool = True) -> dict[str, Any]:
+        state = save_state(self, self.SAVED, include_replay)
         ep = self.episode if include_replay else None  # its rows live in the replay
-        return {
-            "q": self.q.state_dict(),
-            "q_target": self.q_target.state_dict(),
-            "opt": self.opt.state_dict(),
-            "rng": self.rng.bit_generator.state,
-            "heads": self.head_E.copy(),
-            "rms": {
-                "next": self.next_bonus_rms.state_dict(),
-                "reward": self.reward_bonus_rms.state_dict(),
-            },
-            "counters": {
-                "updates": self.clock.state_dict(),
-                "target_syncs": self.target_syncs,
-                "episodes_learned": self.episodes_learned,
-                "epsilon": self.epsilon,
-                "stats": dict(self.stats),
-            },
-            "episode": None
+        state["episode"] = (
+            None
             if ep is None
-            else {"episode": copy.deepcopy(ep), "y": self.y_TK.copy(), "cursor": self.cursor},
-            "replay": self.replay.state_dict() if include_replay else None,
-        }
+            else {"episode": copy.deepcopy(ep), "y": self.y_TK.copy(), "cursor": self.cursor}
+        )
+        return state
 
     def load_state_dict(self, state: dict[str, Any]) -> None:
-        self.q.load_state_dict(state["q"])
-        self.q_target.load_state_dict(state["q_target"])
-        self.opt.load_state_dict(state["opt"])
-        self.rng.bit_generator.state = state["rng"]
-        self.head_E[...] = state["heads"]
-        self.next_bonus_rms.load_state_dict(state["rms"]["next"])
-        self.reward_bonus_rms.load_state_dict(state["rms"]["reward"])
-        c = state["counters"]
-        self.clock.load_state_dict(c["updates"])
-        self.target_syncs = c["target_syncs"]
-        self.episodes_learned, self.epsilon = c["episodes_learned"], c["epsilon"]
-        self.stats = dict(c["stats"])
+        load_state(self, self.SAVED, state)
         self.episode, self.cursor = None, 0
-        if state.get("replay") is not None:
-            self.replay.load_state_dict(state["replay"])
-            if state.get("episode") is not None:
-                self.episode = state["episode"]["episode"]
-                self.y_TK = state["episode"]["y"]
-                self.cursor = state["episode"]["cursor"]
-        else:  # saved without its replay: refill before updating again
-            self.clock.hold()
+        if state.get("replay") is not None and state.get("episode") is not None:
+            self.episode = state["episode"]["episode"]
+            self.y_TK = state["episode"]["y"]
+            self.cursor = state["episode"]["cursor"]
+
+
+AGENT: AgentFactory = OB2IAgent  # the class farsighter.algorithms names; mypy checks the protocol

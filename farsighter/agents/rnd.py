@@ -29,19 +29,24 @@ import torch
 from torch import nn
 
 from farsighter.agents.common import (
+    Counters,
     RunningMeanStd,
-    UpdateClock,
     batch_tensors,
     build_seeded,
     clip_and_step,
     epsilon_greedy,
     linear_schedule,
+    load_state,
     make_optimizer,
     make_replay,
     obs_tensor,
     sample_minibatch,
+    save_state,
+    sync_target,
     td_loss,
+    updates_owed,
 )
+from farsighter.agents.protocol import AgentFactory
 from farsighter.config import Config
 from farsighter.networks import QNetwork, make_torso
 from farsighter.ops.targets import double_q_target
@@ -109,8 +114,7 @@ class RNDAgent:
         self.intrinsic_rms = RunningMeanStd()
         self.replay = make_replay(cfg, obs_space, frame_stack, seed=cfg.seed + 1)
         self.rng = np.random.default_rng(cfg.seed + 2)
-        self.clock = UpdateClock(cfg)  # updates made; refill hold after resume
-        self.target_syncs = 0
+        self.counters = Counters(k=cfg.k)
         self.epsilon = cfg.eps_start
         self.stats = {"intrinsic_reward": float("nan"), "predictor_loss": float("nan")}
 
@@ -196,76 +200,61 @@ class RNDAgent:
     # ------------------------------------------------------------------ learning
     def learn(self, global_step: int) -> dict[str, torch.Tensor]:
         metrics: dict[str, torch.Tensor] = {}
-        for _ in range(self.clock.due(global_step)):
+        for _ in range(updates_owed(self.counters, self.cfg, global_step)):
             metrics["td_loss"] = self.update()
-        syncs = global_step // self.cfg.target_update_every
-        if syncs > self.target_syncs:
-            self.q_target.load_state_dict(self.q.state_dict())
-            self.target_syncs = syncs
+        sync_target(
+            self.counters, global_step, self.cfg.target_update_every, (self.q, self.q_target)
+        )
         return metrics
 
     def update(self) -> torch.Tensor:
         """One double-Q step on extrinsic + weighted intrinsic k-step returns, then one predictor
         step on the same minibatch; returns the TD loss."""
         cfg = self.cfg
-        batch = sample_minibatch(self.replay, cfg, cfg.batch_size, cfg.k)
+        batch = sample_minibatch(self.replay, cfg, cfg.batch_size, self.counters.k)
         t = batch_tensors(batch, self.device)
         ri_B = torch.as_tensor(self.intrinsic_returns(batch), device=self.device)
-        returns_B = t["returns"] + cfg.rnd.intrinsic_weight * ri_B
-        q_B = self.q(t["obs"]).gather(1, t["actions"].unsqueeze(1)).squeeze(1)
+        returns_B = t.returns_B + cfg.rnd.intrinsic_weight * ri_B
+        q_B = self.q(t.obs_B).gather(1, t.actions_B.unsqueeze(1)).squeeze(1)
         with torch.no_grad():
             y_B = double_q_target(
-                returns_B, t["bootstrap"], self.q(t["next_obs"]), self.q_target(t["next_obs"])
+                returns_B, t.bootstrap_B, self.q(t.next_obs_B), self.q_target(t.next_obs_B)
             )
         loss = td_loss(q_B, y_B, cfg.loss)
         clip_and_step(loss, list(self.q.parameters()), self.opt, cfg.max_grad_norm)
-        self.stats["predictor_loss"] = float(self.train_predictor(t["obs"]))
+        self.stats["predictor_loss"] = float(self.train_predictor(t.obs_B))
         return loss.detach()
 
     def diagnostics(self) -> dict[str, float]:
         return {
             "epsilon": self.epsilon,
-            "k": float(self.cfg.k),
+            "k": float(self.counters.k),
             "intrinsic_reward": self.stats["intrinsic_reward"],
             "intrinsic_std": float(self.intrinsic_rms.std),
             "predictor_loss": self.stats["predictor_loss"],
         }
 
     # ------------------------------------------------------------------ checkpoints
+    SAVED = (
+        "q",
+        "q_target",
+        "opt",
+        "rnd_target",
+        "predictor",
+        "rnd_opt",
+        "obs_rms",
+        "intrinsic_rms",
+        "rng",
+        "epsilon",
+        "stats",
+        "counters",
+    )
+
     def state_dict(self, include_replay: bool = True) -> dict[str, Any]:
-        return {
-            "q": self.q.state_dict(),
-            "q_target": self.q_target.state_dict(),
-            "opt": self.opt.state_dict(),
-            "rnd_target": self.rnd_target.state_dict(),
-            "predictor": self.predictor.state_dict(),
-            "rnd_opt": self.rnd_opt.state_dict(),
-            "rms": {"obs": self.obs_rms.state_dict(), "intrinsic": self.intrinsic_rms.state_dict()},
-            "rng": self.rng.bit_generator.state,
-            "counters": {
-                "updates": self.clock.state_dict(),
-                "target_syncs": self.target_syncs,
-                "epsilon": self.epsilon,
-                "stats": dict(self.stats),
-            },
-            "replay": self.replay.state_dict() if include_replay else None,
-        }
+        return save_state(self, self.SAVED, include_replay)
 
     def load_state_dict(self, state: dict[str, Any]) -> None:
-        self.q.load_state_dict(state["q"])
-        self.q_target.load_state_dict(state["q_target"])
-        self.opt.load_state_dict(state["opt"])
-        self.rnd_target.load_state_dict(state["rnd_target"])
-        self.predictor.load_state_dict(state["predictor"])
-        self.rnd_opt.load_state_dict(state["rnd_opt"])
-        self.obs_rms.load_state_dict(state["rms"]["obs"])
-        self.intrinsic_rms.load_state_dict(state["rms"]["intrinsic"])
-        self.rng.bit_generator.state = state["rng"]
-        c = state["counters"]
-        self.clock.load_state_dict(c["updates"])
-        self.target_syncs, self.epsilon = c["target_syncs"], c["epsilon"]
-        self.stats = dict(c["stats"])
-        if state.get("replay") is not None:
-            self.replay.load_state_dict(state["replay"])
-        else:  # saved without its replay: refill before updating again
-            self.clock.hold()
+        load_state(self, self.SAVED, state)
+
+
+AGENT: AgentFactory = RNDAgent  # the class farsighter.algorithms names; mypy checks the protocol

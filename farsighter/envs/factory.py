@@ -14,7 +14,8 @@ from typing import Any
 import gymnasium as gym
 import numpy as np
 
-from farsighter.config import NAF_ALGORITHMS, Config, is_atari_id
+from farsighter import algorithms
+from farsighter.config import Config, is_atari_id
 from farsighter.errors import EnvError
 
 # Ids registered by gymnasium-robotics (imported lazily: it is an optional extra).
@@ -214,11 +215,12 @@ def frame_stack_of(cfg: Config) -> int:
 
 def check_spaces(algo: str, obs_space: gym.Space, act_space: gym.Space) -> None:
     """Raise a one-line EnvError when an algorithm cannot handle the spaces."""
-    if algo in NAF_ALGORITHMS:
+    if algorithms.get(algo).actions == "continuous":
         if not isinstance(act_space, gym.spaces.Box) or len(act_space.shape) != 1:
             raise EnvError(
                 f"algorithm '{algo}' needs a continuous (Box, 1-d) action space; this environment "
-                f"has {act_space} (for discrete actions use ddqn, kddqn, bdqn or farsighter)"
+                f"has {act_space} (for discrete actions use "
+                f"{algorithms.accepted(algorithms.names_for('discrete'))})"
             )
         if not (np.isfinite(act_space.low).all() and np.isfinite(act_space.high).all()):
             raise EnvError(
@@ -228,7 +230,7 @@ def check_spaces(algo: str, obs_space: gym.Space, act_space: gym.Space) -> None:
     elif not isinstance(act_space, gym.spaces.Discrete):
         raise EnvError(
             f"algorithm '{algo}' needs a discrete action space; this environment has {act_space} "
-            "(for continuous actions use naf, knaf, bnaf or farsighter-naf)"
+            f"(for continuous actions use {algorithms.accepted(algorithms.names_for('continuous'))})"
         )
     if not isinstance(obs_space, gym.spaces.Box):
         raise EnvError(
