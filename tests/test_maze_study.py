@@ -1,27 +1,97 @@
 """The maze study end to end at a tiny size: every output exists, resume skips finished runs,
---plot-only redraws from the saved files."""
+--plot-only redraws from the saved files; its run configs, claims and table."""
 
 from __future__ import annotations
 
+import dataclasses
 import os
+import shutil
 from pathlib import Path
 from typing import Any
 
 import numpy as np
 
 from farsighter.cli import main
+from farsighter.config import PRESETS, config_to_dict, make_config
+from farsighter.studies.claims import VERDICT_TEXT
 from farsighter.studies.maze import (
     AGENTS,
     COLORS,
     DEFAULT_AGENTS,
+    ENV_ID,
     PER_SEED_METRICS,
-    VERDICT_TEXT,
+    QUICK,
+    STUDY,
     StudyConfig,
-    _agent_labels,
     _claims,
     _markdown_table,
+    run_config,
     summarise,
 )
+from farsighter.studies.runner import parse, settings_from
+
+RESULTS = Path(__file__).resolve().parents[1] / "docs" / "results" / "maze"
+
+# The shared settings of every maze agent as maze.py held them before they became the `maze`
+# preset (the pre-refactor truth, on top of the `control` preset).
+OLD_COMMON: dict[str, Any] = {
+    "gamma": 1.0,
+    "optimizer": "adam",
+    "lr": 0.001,
+    "optim_eps": 1e-8,
+    "hidden_sizes": (64, 64),
+    "batch_size": 64,
+    "train_every": 4,
+    "buffer_size": 50_000,
+    "learning_starts": 1_000,
+    "target_update_every": 500,
+    "eps_decay_steps": 10_000,
+    "eps_end": 0.05,
+    "loss": "huber",
+    "eval_every": 2_000,
+    "eval_episodes": 1,
+    "eval_max_steps": 200,
+    "checkpoint_every": 0,
+    "log_every": 1_000,
+    "blr.posterior_every": 1_000,
+    "blr.posterior_samples": 5_000,
+    "blr.prior_std": 10.0,
+    "blr.noise_std": 10.0,
+}
+
+
+def test_run_configs_are_those_of_before_the_maze_preset(tmp_path: Path) -> None:
+    assert PRESETS["maze"].values == OLD_COMMON
+    for agent in AGENTS:
+        old = make_config(
+            agent.algo,
+            ENV_ID,
+            preset="control",
+            seed=3,
+            total_steps=40_000,
+            run_dir=str(tmp_path),
+            progress=False,
+            torch_threads=1,
+            device="cpu",
+            overwrite=True,
+            **{**OLD_COMMON, **agent.overrides},
+        )
+        new = run_config(agent, 3, 40_000, tmp_path)
+        assert new.preset == "maze"  # the only difference: the name of where they come from
+        assert config_to_dict(new) == config_to_dict(dataclasses.replace(old, preset="maze")), (
+            agent.label
+        )
+
+
+def test_the_committed_results_redraw_to_the_same_report(tmp_path: Path) -> None:
+    out = tmp_path / "maze"
+    out.mkdir()
+    shutil.copy(RESULTS / "study.json", out)
+    shutil.copytree(RESULTS / "runs", out / "runs")
+    assert main(["maze", "--plot-only", str(out)]) == 0
+    for name in ("report.md", "table.md", "table.csv"):
+        text = (out / name).read_text().replace(str(out), "docs/results/maze")
+        assert text == (RESULTS / name).read_text(), name
 
 
 def test_tiny_study_resume_and_plot_only(tmp_path: Path) -> None:
@@ -95,8 +165,9 @@ def test_agents_are_the_library_agents() -> None:
     assert by["Farsighter (k=10)"].overrides == {"k": 10}  # the two differ in k alone
     assert by["BDQN (redraw every step)"].algo == "bdqn"
     assert by["BDQN (redraw every step)"].overrides == {"blr.redraw": "step"}
-    assert _agent_labels(["all"]) == tuple(labels)
-    assert _agent_labels(["RND", "DDQN"]) == ("RND", "DDQN")
+    assert settings_from(STUDY, parse(STUDY, ["--agents", "all"])).agents == tuple(labels)
+    some = settings_from(STUDY, parse(STUDY, ["--agents", "RND", "DDQN", "--quick"]))
+    assert some == dataclasses.replace(QUICK, agents=("RND", "DDQN"))
 
 
 # ------------------------------------------------------------------------------------------------

@@ -3,11 +3,14 @@ paper's Table 3 beside ours, resume skips finished runs, --plot-only redraws."""
 
 from __future__ import annotations
 
+import inspect
 import os
 from pathlib import Path
 
 from farsighter.cli import main
-from farsighter.studies.robotics import AGENTS, PAPER_TABLE3, _claims
+from farsighter.config import make_config
+from farsighter.studies import robotics
+from farsighter.studies.robotics import AGENTS, PAPER_TABLE3, QUICK, _claims, run_config
 
 
 def test_tiny_walker_study_resume_and_plot_only(tmp_path: Path) -> None:
@@ -78,6 +81,30 @@ def test_goal_task_reports_success_rates(tmp_path: Path) -> None:
     assert main(args) == 0
     assert "success rate" in (out / "table.md").read_text()
     assert "n/a" in (out / "table.md").read_text()  # no paper number for this task
+
+
+def test_run_configs_are_the_continuous_preset_with_the_study_budget(tmp_path: Path) -> None:
+    for agent in AGENTS:
+        assert run_config(agent, QUICK, 2, tmp_path) == make_config(
+            agent.algo,
+            QUICK.env,
+            preset="continuous",
+            seed=2,
+            total_steps=QUICK.steps,
+            eval_every=QUICK.eval_every,
+            eval_episodes=QUICK.eval_episodes,
+            learning_starts=1_000,
+            checkpoint_every=0,
+            run_dir=str(tmp_path),
+            progress=False,
+            torch_threads=1,
+            device="cpu",
+            overwrite=True,
+        )
+
+
+def test_robotics_borrows_nothing_from_the_maze_study() -> None:
+    assert "studies.maze" not in inspect.getsource(robotics)
 
 
 def test_agents_and_paper_numbers() -> None:

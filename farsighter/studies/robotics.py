@@ -1,39 +1,28 @@
 """The robotics study (paper section 5.2, Figure 3 and Table 3), a thin script over the library.
 
 Runs the four continuous agents (NAF, multi-step NAF, Bayesian NAF, Farsighter-NAF) for several
-seeds on one MuJoCo task in parallel worker processes, then draws the learning curves (greedy
-evaluation return, or success rate for goal-conditioned tasks; mean and std band over seeds) and
-a table of the final evaluation, mean +- std over seeds, with the paper's Table 3 beside it
-(Walker2D at 30k steps). Everything is drawn from saved files, so ``--plot-only`` redraws it; an
-interrupted study is resumed (finished runs, with ``summary.json``, are kept).
+seeds on one MuJoCo task (:mod:`farsighter.studies.runner` runs the grid, resumes an interrupted
+study and loads the saved runs), then draws the learning curves (greedy evaluation return, or
+success rate for goal-conditioned tasks; mean and std band over seeds) and a table of the final
+evaluation, mean +- std over seeds, with the paper's Table 3 beside it (Walker2D at 30k steps).
+Everything is drawn from saved files, so ``--plot-only`` redraws it.
 """
 
 from __future__ import annotations
 
 import csv
-import json
-import os
-import shutil
 from collections.abc import Sequence
-from dataclasses import asdict, dataclass
+from dataclasses import dataclass, replace
 from pathlib import Path
-from typing import Any
+from typing import Annotated, Any
 
 import numpy as np
+import tyro
 
-from farsighter.config import Config, make_config
+from farsighter.config import Config
 from farsighter.errors import FarsighterError
-from farsighter.studies.maze import slug
-from farsighter.studies.runner import add_study_arguments, execute, redraw, run_and_report
-
-
-@dataclass(frozen=True)
-class Agent:
-    """One line of the study: the paper's label and the library's algorithm."""
-
-    label: str
-    algo: str
-
+from farsighter.studies import runner
+from farsighter.studies.runner import Agent, Runs, StudyArgs, band, figure, finish_axes, slug
 
 AGENTS: tuple[Agent, ...] = (
     Agent("NAF", "naf"),
@@ -72,92 +61,49 @@ QUICK = StudyConfig(seeds=(1, 2), steps=6_000, eval_every=1_000, eval_episodes=3
 def run_config(agent: Agent, study: StudyConfig, seed: int, run_dir: Path) -> Config:
     """The library's ``continuous`` preset (identical shared settings for the four agents, as
     the paper keeps them), with the study's budget and evaluation cadence."""
-    return make_config(
-        agent.algo,
+    return runner.run_config(
+        agent,
         study.env,
-        preset="continuous",
-        seed=seed,
-        total_steps=study.steps,
+        "continuous",
+        seed,
+        study.steps,
+        run_dir,
         eval_every=study.eval_every,
         eval_episodes=study.eval_episodes,
         learning_starts=min(1_000, study.steps // 4),
         checkpoint_every=0,
-        run_dir=str(run_dir),
-        progress=False,
-        torch_threads=1,
-        device="cpu",
-        overwrite=True,
     )
 
 
-class Progress:
-    """Read-only callback reporting the step of a run to the parent process."""
+@dataclass(frozen=True)
+class Args(StudyArgs):
+    """The flags of ``farsighter robotics``: the shared ones and the task's."""
 
-    def __init__(self, progress: Any, key: str) -> None:
-        self.progress, self.key = progress, key
-
-    def on_step(self, global_step: int, info: dict[str, Any], agent: Any) -> None:
-        if self.progress is not None and global_step % 500 == 0:
-            self.progress[self.key] = global_step
-
-    def on_finish(self, run_dir: Path, agent: Any) -> None:
-        if self.progress is not None:
-            self.progress[self.key] = -1
+    env: Annotated[str | None, tyro.conf.arg(metavar="ID", help_behavior_hint="")] = None
+    """Task: Walker2d-v5 (default), FetchPickAndPlace-v4, HandManipulateBlock-v1, any other id."""
+    eval_every: Annotated[int | None, tyro.conf.arg(metavar="N", help_behavior_hint="")] = None
+    """Steps between greedy evaluations (default: the study's, at most half of --steps)."""
+    eval_episodes: Annotated[int | None, tyro.conf.arg(metavar="N", help_behavior_hint="")] = None
+    """Episodes of each evaluation (default: the study's)."""
 
 
-def _run(label: str, study: StudyConfig, seed: int, run_dir: str, progress: Any) -> str:
-    from farsighter.train import train
-
-    agent = next(a for a in AGENTS if a.label == label)
-    train(run_config(agent, study, seed, Path(run_dir)), callbacks=[Progress(progress, run_dir)])
-    return run_dir
+def _resolve(study: StudyConfig, args: Args) -> StudyConfig:
+    if args.eval_every is None:  # at least two evaluations
+        return replace(study, eval_every=min(study.eval_every, max(1, study.steps // 2)))
+    return study
 
 
-def run_dir_of(out: Path, label: str, seed: int) -> Path:
-    return out / "runs" / f"{slug(label)}__s{seed}"
-
-
-def run_study(out: Path, study: StudyConfig, show_progress: bool = True) -> Path:
-    """Run (or resume) every agent x seed, then write the figure, table and report."""
-    unknown = [a for a in study.agents if a not in {x.label for x in AGENTS}]
-    if unknown:
-        raise FarsighterError(
-            f"unknown robotics agent(s) {unknown}; accepted: {', '.join(a.label for a in AGENTS)}"
-        )
+def _check(study: StudyConfig) -> None:
+    for name, value in (("eval-every", study.eval_every), ("eval-episodes", study.eval_episodes)):
+        if value < 1:
+            raise FarsighterError(f"--{name} must be >= 1 (got {value})")
     from farsighter.envs import make_env
 
-    make_env(run_config(AGENTS[0], study, 1, out), seed=0).close()  # a bad id fails here, once
-    out.mkdir(parents=True, exist_ok=True)
-    saved = out / "study.json"
-    current = json.loads(json.dumps(asdict(study)))
-    if saved.exists():
-        previous = json.loads(saved.read_text())
-        if {**previous, "workers": 0} != {**current, "workers": 0}:
-            raise FarsighterError(
-                f"{out} holds a study with other settings ({saved}); use another --out or "
-                "--overwrite"
-            )
-    saved.write_text(json.dumps(current, indent=2) + "\n")
-    jobs = []
-    for label in study.agents:
-        for seed in study.seeds:
-            run_dir = run_dir_of(out, label, seed)
-            if (run_dir / "summary.json").exists():
-                continue  # finished before: keep it
-            if run_dir.exists():
-                shutil.rmtree(run_dir)
-            jobs.append((label, seed, run_dir))
-    if jobs:
-        execute(
-            _run,
-            [(label, study, seed, str(run_dir)) for label, seed, run_dir in jobs],
-            steps=study.steps,
-            workers=study.workers or os.cpu_count() or 1,
-            desc=f"robotics study {study.env}",
-            show_progress=show_progress,
-        )
-    write_outputs(out)
-    return out
+    make_env(run_config(AGENTS[0], study, 1, Path(".")), seed=0).close()  # a bad id fails here
+
+
+def _name(study: StudyConfig) -> str:
+    return "robotics-" + slug(study.env)
 
 
 # ------------------------------------------------------------------------------------------------
@@ -165,67 +111,52 @@ def run_study(out: Path, study: StudyConfig, show_progress: bool = True) -> Path
 # ------------------------------------------------------------------------------------------------
 
 
-def load_runs(out: Path) -> tuple[dict[str, Any], dict[str, list[dict[str, Any]]]]:
-    from farsighter.plots import read_csv
-
-    study = json.loads((out / "study.json").read_text())
-    runs: dict[str, list[dict[str, Any]]] = {}
-    for label in study["agents"]:
-        for seed in study["seeds"]:
-            run_dir = run_dir_of(out, label, seed)
-            if not (run_dir / "summary.json").exists():
-                continue
-            success = run_dir / "eval_success.csv"
-            runs.setdefault(label, []).append(
-                {
-                    "seed": seed,
-                    "eval": read_csv(run_dir / "eval.csv"),
-                    "success": read_csv(success) if success.exists() else None,
-                }
-            )
-    if not runs:
-        raise FarsighterError(f"{out} holds no finished robotics runs (runs/*/summary.json)")
-    return study, runs
+def _goal(runs: Runs) -> bool:
+    """A goal-conditioned task: every run recorded its evaluation success rate."""
+    return all(r["eval_success"] is not None for items in runs.values() for r in items)
 
 
 def _curve(items: list[dict[str, Any]], goal: bool) -> tuple[np.ndarray, np.ndarray]:
     """Steps and (seeds x evaluations) values of the greedy evaluation (return or success)."""
-    key, column = ("success", "eval_success_rate") if goal else ("eval", "eval_return_mean")
+    key, column = ("eval_success", "eval_success_rate") if goal else ("eval", "eval_return_mean")
     n = min(len(r[key]["global_step"]) for r in items)
     steps = items[0][key]["global_step"][:n]
     return steps, np.array([r[key][column][:n] for r in items], dtype=float)
 
 
-def summarise(study: dict[str, Any], runs: dict[str, list[dict[str, Any]]]) -> list[dict[str, Any]]:
-    goal = all(r["success"] is not None for items in runs.values() for r in items)
+def _final(items: list[dict[str, Any]], key: str, column: str) -> tuple[float, float]:
+    """Mean and std over seeds of the last evaluation's ``column``."""
+    values = np.array([r[key][column][-1] for r in items])
+    return float(values.mean()), float(values.std())
+
+
+def summarise(study: dict[str, Any], runs: Runs) -> list[dict[str, Any]]:
+    goal = _goal(runs)
     paper = PAPER_TABLE3.get(study["env"].split(":")[-1].split("-v")[0], {})
     rows = []
     for label, items in runs.items():
-        final_return = np.array([r["eval"]["eval_return_mean"][-1] for r in items])
-        row: dict[str, Any] = {
-            "agent": label,
-            "seeds": len(items),
-            "final_return_mean": float(final_return.mean()),
-            "final_return_std": float(final_return.std()),
-            "final_success_mean": float("nan"),
-            "final_success_std": float("nan"),
-            "paper_mean": paper.get(label, (float("nan"),) * 2)[0],
-            "paper_std": paper.get(label, (float("nan"),) * 2)[1],
-        }
-        if goal:
-            final_success = np.array([r["success"]["eval_success_rate"][-1] for r in items])
-            row["final_success_mean"] = float(final_success.mean())
-            row["final_success_std"] = float(final_success.std())
-        rows.append(row)
+        ret = _final(items, "eval", "eval_return_mean")
+        success = _final(items, "eval_success", "eval_success_rate") if goal else (np.nan,) * 2
+        paper_mean, paper_std = paper.get(label, (float("nan"),) * 2)
+        rows.append(
+            {
+                "agent": label,
+                "seeds": len(items),
+                "final_return_mean": ret[0],
+                "final_return_std": ret[1],
+                "final_success_mean": float(success[0]),
+                "final_success_std": float(success[1]),
+                "paper_mean": paper_mean,
+                "paper_std": paper_std,
+            }
+        )
     return rows
 
 
-def write_outputs(out: Path) -> None:
-    """Figure, table (CSV and Markdown) and report.md, from the saved run files only."""
-    study, runs = load_runs(out)
-    goal = all(r["success"] is not None for items in runs.values() for r in items)
+def write_outputs(out: Path, study: dict[str, Any], runs: Runs) -> None:
+    """Figure, table (CSV and Markdown) and report.md."""
+    goal = _goal(runs)
     rows = summarise(study, runs)
-    (out / "figures").mkdir(exist_ok=True)
     _plot(study, runs, goal, out / "figures" / "curves.png")
     with (out / "table.csv").open("w", newline="") as fh:
         writer = csv.DictWriter(fh, fieldnames=list(rows[0]))
@@ -235,28 +166,17 @@ def write_outputs(out: Path) -> None:
     _write_report(study, rows, goal, out)
 
 
-def _plot(
-    study: dict[str, Any], runs: dict[str, list[dict[str, Any]]], goal: bool, file: Path
-) -> None:
-    import matplotlib
-
-    matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
-
-    fig, ax = plt.subplots(figsize=(7, 4.2))
-    for i, (label, items) in enumerate(runs.items()):
-        steps, values = _curve(items, goal)
-        mean, std = values.mean(axis=0), values.std(axis=0)
-        ax.plot(steps, mean, color=f"C{i}", label=label)
-        ax.fill_between(steps, mean - std, mean + std, color=f"C{i}", alpha=0.15)
-    ax.set_xlabel("environment steps")
-    ax.set_ylabel("evaluation success rate" if goal else "evaluation return")
-    ax.set_title(f"{study['env']}: mean ± std over {len(study['seeds'])} seeds")
-    ax.legend(fontsize=8)
-    ax.grid(alpha=0.3)
-    fig.tight_layout()
-    fig.savefig(file, dpi=120)
-    plt.close(fig)
+def _plot(study: dict[str, Any], runs: Runs, goal: bool, file: Path) -> None:
+    with figure(file, figsize=(7, 4.2)) as (_, ax):
+        for i, (label, items) in enumerate(runs.items()):
+            steps, values = _curve(items, goal)
+            band(ax, steps, values, f"C{i}", label)
+        finish_axes(
+            ax,
+            "environment steps",
+            "evaluation success rate" if goal else "evaluation return",
+            f"{study['env']}: mean ± std over {len(study['seeds'])} seeds",
+        )
 
 
 def _pm(mean: float, std: float, digits: int = 1) -> str:
@@ -363,49 +283,22 @@ def _write_report(study: dict[str, Any], rows: list[dict[str, Any]], goal: bool,
     (out / "report.md").write_text("\n".join(lines))
 
 
-def main(argv: Sequence[str]) -> int:
-    import argparse
+STUDY = runner.Study(
+    kind="robotics",
+    description="The continuous-control study of section 5.2 (Figure 3, Table 3).",
+    agents=AGENTS,
+    full=StudyConfig(),
+    quick=QUICK,
+    run_config=run_config,
+    write_outputs=write_outputs,
+    run_files=("eval.csv", "eval_success.csv"),
+    args=Args,
+    resolve=_resolve,
+    check=_check,
+    name=_name,
+)
 
-    parser = argparse.ArgumentParser(
-        prog="farsighter robotics",
-        description="The continuous-control study of section 5.2 (Figure 3, Table 3).",
-    )
-    parser.add_argument(
-        "--env",
-        default=None,
-        help="Walker2d-v5 (default), FetchPickAndPlace-v4, "
-        "HandManipulateBlock-v1 or any continuous Gymnasium id",
-    )
-    add_study_arguments(
-        parser,
-        quick_help=f"{len(QUICK.seeds)} seeds x {QUICK.steps:,} steps",
-        out_help="study directory (default studies/robotics-ENV)",
-        agents_help=f"subset of: {', '.join(repr(a.label) for a in AGENTS)}",
-    )
-    parser.add_argument("--eval-every", type=int, default=None)
-    parser.add_argument("--eval-episodes", type=int, default=None)
-    args = parser.parse_args(list(argv))
-    if args.plot_only:
-        return redraw(Path(args.plot_only), "robotics", write_outputs)
-    base = QUICK if args.quick else StudyConfig()
-    study = StudyConfig(
-        env=args.env or base.env,
-        seeds=tuple(args.seeds) if args.seeds else base.seeds,
-        steps=args.steps or base.steps,
-        eval_every=args.eval_every or min(base.eval_every, max(1, (args.steps or base.steps) // 2)),
-        eval_episodes=args.eval_episodes or base.eval_episodes,
-        workers=args.workers,
-        agents=tuple(args.agents) if args.agents else base.agents,
-    )
-    for name, value in (
-        ("steps", study.steps),
-        ("eval-every", study.eval_every),
-        ("eval-episodes", study.eval_episodes),
-    ):
-        if value < 1:
-            raise FarsighterError(f"--{name} must be >= 1 (got {value})")
-    default_out = "studies/robotics-" + slug(study.env) + ("-quick" if args.quick else "")
-    out = Path(args.out or default_out)
-    return run_and_report(
-        out, args.overwrite, "robotics", lambda: run_study(out, study, not args.no_progress)
-    )
+
+def main(argv: Sequence[str]) -> int:
+    """``farsighter robotics ARGV``."""
+    return runner.main(STUDY, argv)

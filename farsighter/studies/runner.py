@@ -1,62 +1,344 @@
-"""Run a study's jobs in worker processes (or in this one) with one progress bar."""
+"""The skeleton every study shares; a study file gives only what is its own (:class:`Study`).
+
+The runner parses a study command's flags (:class:`StudyArgs`, with tyro like ``farsighter
+train``) and checks them, builds the grid (every agent x seed, a run directory
+``runs/<slug>__s<seed>`` each), keeps the study's settings in ``study.json``, resumes an
+interrupted study (finished runs are kept, unfinished ones rerun), runs the jobs in worker
+processes with one progress bar, loads the saved files of the finished runs and hands them to the
+study's outputs, which ``--plot-only`` redraws.
+"""
 
 from __future__ import annotations
 
-import argparse
+import dataclasses
+import json
+import os
 import shutil
 import time
-from collections.abc import Callable, Sequence
+import warnings
+from collections.abc import Callable, Iterator, MutableMapping, Sequence
 from concurrent.futures import FIRST_COMPLETED, ProcessPoolExecutor, wait
+from contextlib import contextmanager
+from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Any
+from typing import Annotated, Any, Protocol
 
-from farsighter.errors import FarsighterError
+import numpy as np
+import tyro
+
+from farsighter.config import Config, make_config, validate
+from farsighter.errors import ConfigError, FarsighterError
+
+Runs = dict[str, list[dict[str, Any]]]
+"""Per agent label, one dict per finished seed: ``"seed"`` and the run's saved files."""
 
 
-def add_study_arguments(
-    parser: argparse.ArgumentParser, *, quick_help: str, out_help: str, agents_help: str
-) -> None:
-    """The arguments every study command shares (the study adds its own)."""
-    parser.add_argument("--quick", action="store_true", help=quick_help)
-    parser.add_argument("--out", default=None, help=out_help)
-    parser.add_argument("--seeds", type=int, nargs="+", default=None)
-    parser.add_argument("--steps", type=int, default=None)
-    parser.add_argument(
-        "--workers",
-        type=int,
-        default=0,
-        help="worker processes (0: one per core; 1: runs in this process)",
+@dataclass(frozen=True)
+class Agent:
+    """One line of a study: a label, an algorithm and its overrides of the study's settings."""
+
+    label: str
+    algo: str
+    overrides: dict[str, Any] = field(default_factory=dict)
+
+
+def slug(label: str) -> str:
+    """A label as a directory name: ``"Farsighter (k=10)"`` -> ``farsighter-k-10``."""
+    return "".join(c if c.isalnum() else "-" for c in label.lower()).strip("-").replace("--", "-")
+
+
+def run_dir_of(out: Path, label: str, seed: int) -> Path:
+    return out / "runs" / f"{slug(label)}__s{seed}"
+
+
+def run_config(
+    agent: Agent, env: str, preset: str, seed: int, steps: int, run_dir: Path, **values: Any
+) -> Config:
+    """One run of a study: ``preset`` <- the study's ``values`` <- the agent's overrides, with the
+    seed, the budget and the run directory; on one CPU thread and without a progress bar of its
+    own (the runner draws one for the whole study)."""
+    return make_config(
+        agent.algo,
+        env,
+        preset=preset,
+        **{**values, **agent.overrides},
+        seed=seed,
+        total_steps=steps,
+        run_dir=str(run_dir),
+        progress=False,
+        torch_threads=1,
+        device="cpu",
+        overwrite=True,
     )
-    parser.add_argument("--agents", nargs="+", default=None, help=agents_help)
-    parser.add_argument(
-        "--plot-only",
-        metavar="DIR",
-        default=None,
-        help="redraw figures, table and report of an existing study",
-    )
-    parser.add_argument("--overwrite", action="store_true", help="delete --out first")
-    parser.add_argument("--no-progress", action="store_true")
 
 
-def redraw(path: Path, kind: str, write_outputs: Callable[[Path], None]) -> int:
-    """--plot-only: figures, table and report again from a study directory's saved files."""
-    if not (path / "study.json").exists():
-        raise FarsighterError(f"{path} holds no {kind} study (no study.json)")
-    write_outputs(path)
-    print(f"report: {path / 'report.md'}")
-    return 0
+class Settings(Protocol):
+    """What every study's settings hold (a frozen dataclass, saved as ``study.json``)."""
+
+    @property
+    def seeds(self) -> tuple[int, ...]: ...
+    @property
+    def steps(self) -> int: ...
+    @property
+    def workers(self) -> int: ...
+    @property
+    def agents(self) -> tuple[str, ...]: ...
 
 
-def run_and_report(out: Path, overwrite: bool, kind: str, run: Callable[[], object]) -> int:
-    """Delete ``out`` first if asked, run the study, say where its outputs are."""
-    if overwrite and out.exists():
+def _flag(metavar: str, hint: str) -> Any:
+    return tyro.conf.arg(metavar=metavar, help_behavior_hint=hint)
+
+
+_STUDY_DEFAULT = "(default: the study's)"
+
+
+@dataclass(frozen=True)
+class StudyArgs:
+    """The flags every study command shares (a study may add its own in a subclass)."""
+
+    quick: tyro.conf.FlagCreatePairsOff[bool] = False
+    """The quick study (its settings are given above)."""
+    out: Annotated[str | None, _flag("DIR", "(default: studies/<study>[-quick])")] = None
+    """Study directory."""
+    seeds: Annotated[tuple[int, ...] | None, _flag("SEED [SEED ...]", _STUDY_DEFAULT)] = None
+    """Seeds to run, each >= 0."""
+    steps: Annotated[int | None, _flag("N", _STUDY_DEFAULT)] = None
+    """Environment steps of each run."""
+    workers: Annotated[int, tyro.conf.arg(metavar="N")] = 0
+    """Worker processes (0: one per core; 1: the runs go one after another in this process)."""
+    agents: Annotated[tuple[str, ...] | None, _flag("LABEL [LABEL ...]", _STUDY_DEFAULT)] = None
+    """Agents by label (listed above), or 'all'."""
+    plot_only: Annotated[str | None, _flag("DIR", "")] = None
+    """Redraw the outputs of a study directory from its saved runs (takes no other flag)."""
+    overwrite: tyro.conf.FlagCreatePairsOff[bool] = False
+    """Delete the study directory (--out) first."""
+    progress: bool = True
+    """Show a progress bar over all runs."""
+
+
+@dataclass(frozen=True)
+class Study:
+    """What a study file gives the runner. The hooks are module-level functions (a job is pickled
+    to a worker process)."""
+
+    kind: str
+    """The command's name (``farsighter <kind>``); names the study in messages."""
+    description: str
+    """First lines of ``--help``."""
+    agents: tuple[Agent, ...]
+    """Every agent the study can run."""
+    full: Any
+    """The default settings (a frozen dataclass with the fields of :class:`Settings`)."""
+    quick: Any
+    """The settings of ``--quick``."""
+    run_config: Callable[[Agent, Any, int, Path], Config]
+    """(agent, settings, seed, run_dir) -> the run's config."""
+    write_outputs: Callable[[Path, dict[str, Any], Runs], None]
+    """(study directory, its study.json, the finished runs) -> figures, tables, report."""
+    run_files: tuple[str, ...]
+    """Files loaded from each finished run (``*.csv``, ``*.npy``, ``*.json``), by stem; None
+    where a run lacks one."""
+    finished: tuple[str, ...] = ("summary.json",)
+    """Files a finished run has: it is kept on resume and loaded for the outputs."""
+    args: type[StudyArgs] = StudyArgs
+    """The command's flags."""
+    callback: Callable[[Any], Any] | None = None
+    """settings -> a read-only callback of each run (what the loop does not record)."""
+    resolve: Callable[[Any, Any], Any] | None = None
+    """(settings, args) -> settings: a value the flags leave to the study."""
+    check: Callable[[Any], None] | None = None
+    """The study's own checks of its settings (raise :class:`FarsighterError`)."""
+    name: Callable[[Any], str] | None = None
+    """settings -> the default study directory's name under studies/ (default: kind)."""
+
+    def agent(self, label: str) -> Agent:
+        return next(a for a in self.agents if a.label == label)
+
+    def labels(self) -> tuple[str, ...]:
+        return tuple(a.label for a in self.agents)
+
+
+# ------------------------------------------------------------------------------------------------
+# The command: flags -> settings -> checks -> runs -> outputs.
+# ------------------------------------------------------------------------------------------------
+
+
+def main(study: Study, argv: Sequence[str]) -> int:
+    """``farsighter <study.kind> ARGV``: every flag is checked before anything is written."""
+    args = parse(study, argv)
+    if args.plot_only is not None:
+        _alone(args)
+        return redraw(study, Path(args.plot_only))
+    settings = settings_from(study, args)
+    check(study, settings)
+    out = out_dir(study, settings, args)
+    if args.overwrite and out.exists():
         shutil.rmtree(out)
     t0 = time.perf_counter()
-    run()
-    print(f"{kind} study done in {time.perf_counter() - t0:.0f} s")
+    run_study(study, settings, out, args.progress)
+    print(f"{study.kind} study done in {time.perf_counter() - t0:.0f} s")
     print(f"report: {out / 'report.md'}")
     print(f"figures: {out / 'figures'}")
     return 0
+
+
+def parse(study: Study, argv: Sequence[str]) -> StudyArgs:
+    """The command's flags (tyro: a bad value or an unknown flag exits with 2)."""
+    prog = f"farsighter {study.kind}"
+    return tyro.cli(study.args, args=list(argv), prog=prog, description=_help(study))
+
+
+def out_dir(study: Study, settings: Any, args: StudyArgs) -> Path:
+    """--out, or studies/<the study's name>[-quick]."""
+    if args.out:
+        return Path(args.out)
+    name = study.name(settings) if study.name else study.kind
+    return Path("studies") / (name + ("-quick" if args.quick else ""))
+
+
+def _help(study: Study) -> str:
+    q = study.quick
+    labels = ", ".join(repr(label) for label in study.labels())
+    return (
+        f"{study.description}\n\n--quick: {', '.join(q.agents)}; {len(q.seeds)} seeds x "
+        f"{q.steps:,} steps. Agents (--agents): {labels}."
+    )
+
+
+def _alone(args: StudyArgs) -> None:
+    """--plot-only redraws a study where it is: the flags that set up a run do not apply."""
+    others = [
+        "--" + f.name.replace("_", "-")
+        for f in dataclasses.fields(args)
+        if f.name not in ("plot_only", "progress") and getattr(args, f.name) != f.default
+    ]
+    if others:
+        raise FarsighterError(
+            f"--plot-only DIR redraws the study in DIR from its saved runs and takes no other "
+            f"flag (got {', '.join(others)}); to redraw elsewhere, copy DIR first"
+        )
+
+
+def settings_from(study: Study, args: StudyArgs) -> Any:
+    """The quick or full settings with the flags given (those named like a field of them)."""
+    base = study.quick if args.quick else study.full
+    given = {
+        f.name: getattr(args, f.name)
+        for f in dataclasses.fields(base)
+        if getattr(args, f.name, None) is not None
+    }
+    if args.agents == ("all",):
+        given["agents"] = study.labels()
+    settings = dataclasses.replace(base, **given)
+    return study.resolve(settings, args) if study.resolve else settings
+
+
+def check(study: Study, settings: Settings) -> None:
+    """Raise :class:`FarsighterError` with one line on the first bad setting; then every run's
+    config is validated as ``farsighter train`` validates one, so nothing starts that would fail."""
+    labels = study.labels()
+    seeds = " ".join(str(s) for s in settings.seeds)
+    unknown = [a for a in settings.agents if a not in labels]
+    checks: list[tuple[bool, str]] = [
+        (
+            settings.workers >= 0,
+            f"--workers must be >= 0 (0: one per core; got {settings.workers})",
+        ),
+        (settings.steps >= 1, f"--steps must be >= 1 (got {settings.steps})"),
+        (len(settings.seeds) >= 1, "--seeds must name at least one seed"),
+        (all(s >= 0 for s in settings.seeds), f"--seeds must be >= 0 (got {seeds})"),
+        (len(set(settings.seeds)) == len(settings.seeds), f"--seeds name a seed twice ({seeds})"),
+        (len(settings.agents) >= 1, f"--agents must name at least one of: {', '.join(labels)}"),
+        (
+            not unknown,
+            f"unknown {study.kind} agent(s) {unknown}; accepted: {', '.join(labels)}, all",
+        ),
+        (len(set(settings.agents)) == len(settings.agents), "--agents name an agent twice"),
+    ]
+    for ok, message in checks:
+        if not ok:
+            raise FarsighterError(message)
+    if study.check:
+        study.check(settings)
+    for label in settings.agents:
+        for seed in settings.seeds:
+            try:
+                validate(study.run_config(study.agent(label), settings, seed, Path(".")))
+            except ConfigError as exc:
+                raise ConfigError(f"{study.kind} agent '{label}': {exc}") from None
+
+
+def run_study(study: Study, settings: Any, out: Path, show_progress: bool = True) -> Path:
+    """Run (or resume) every agent x seed, then write the study's outputs."""
+    jobs = _prepare(study, settings, out)
+    n_runs = len(settings.agents) * len(settings.seeds)
+    if jobs:
+        execute(
+            _run,
+            jobs,
+            steps=settings.steps,
+            workers=settings.workers or os.cpu_count() or 1,
+            desc=f"{study.kind} study",
+            show_progress=show_progress,
+            done_before=(n_runs - len(jobs)) * settings.steps,
+        )
+    _write(study, out)
+    return out
+
+
+def _prepare(study: Study, settings: Any, out: Path) -> list[tuple[Any, ...]]:
+    """Save the settings (a study.json with other settings is refused) and list the runs to do:
+    a finished run is kept, an unfinished one removed and done again."""
+    out.mkdir(parents=True, exist_ok=True)
+    saved = out / "study.json"
+    current = json.loads(json.dumps(dataclasses.asdict(settings)))
+    if saved.exists():
+        previous = json.loads(saved.read_text())
+        if {**previous, "workers": 0} != {**current, "workers": 0}:
+            raise FarsighterError(
+                f"{out} holds a study with other settings ({saved}); use another --out or "
+                "--overwrite"
+            )
+    saved.write_text(json.dumps(current, indent=2) + "\n")
+    jobs = []
+    for label in settings.agents:
+        for seed in settings.seeds:
+            run_dir = run_dir_of(out, label, seed)
+            if _finished(study, run_dir):
+                continue
+            if run_dir.exists():
+                shutil.rmtree(run_dir)  # interrupted: its callbacks' state is gone, rerun it
+            jobs.append((study, label, settings, seed, str(run_dir)))
+    return jobs
+
+
+def _finished(study: Study, run_dir: Path) -> bool:
+    return all((run_dir / name).exists() for name in study.finished)
+
+
+class Progress:
+    """Read-only callback: tells the parent process how far a run is (-1 when done)."""
+
+    def __init__(self, progress: MutableMapping[str, int], key: str, every: int = 500) -> None:
+        self.progress, self.key, self.every, self.next = progress, key, every, 0
+
+    def on_step(self, global_step: int, info: dict[str, Any], agent: Any) -> None:
+        if global_step >= self.next:
+            self.next = global_step + self.every
+            self.progress[self.key] = global_step
+
+    def on_finish(self, run_dir: Path, agent: Any) -> None:
+        self.progress[self.key] = -1
+
+
+def _run(study: Study, label: str, settings: Any, seed: int, run_dir: str, progress: Any) -> str:
+    """One job (in a worker process): train the run with the study's callback."""
+    from farsighter.train import train
+
+    cfg = study.run_config(study.agent(label), settings, seed, Path(run_dir))
+    callbacks = [study.callback(settings)] if study.callback else []
+    train(cfg, callbacks=[*callbacks, Progress(progress, f"{label}|{seed}")])
+    return run_dir
 
 
 def execute(
@@ -111,3 +393,88 @@ def execute(
         bar.n = total
     finally:
         bar.close()
+
+
+# ------------------------------------------------------------------------------------------------
+# Outputs: drawn from the saved files only.
+# ------------------------------------------------------------------------------------------------
+
+
+def redraw(study: Study, path: Path) -> int:
+    """--plot-only: the outputs again from a study directory's saved files."""
+    if not (path / "study.json").exists():
+        raise FarsighterError(f"{path} holds no {study.kind} study (no study.json)")
+    _write(study, path)
+    print(f"report: {path / 'report.md'}")
+    return 0
+
+
+def _write(study: Study, out: Path) -> None:
+    saved, runs = load_runs(study, out)
+    (out / "figures").mkdir(exist_ok=True)
+    study.write_outputs(out, saved, runs)
+
+
+def load_runs(study: Study, out: Path) -> tuple[dict[str, Any], Runs]:
+    """``study.json``, and per agent the saved files of its finished runs (seed order)."""
+    saved = json.loads((out / "study.json").read_text())
+    runs: Runs = {}
+    for label in saved["agents"]:
+        for seed in saved["seeds"]:
+            run_dir = run_dir_of(out, label, seed)
+            if _finished(study, run_dir):
+                files = {Path(name).stem: _read(run_dir / name) for name in study.run_files}
+                runs.setdefault(label, []).append({"seed": seed, **files})
+    if not runs:
+        raise FarsighterError(
+            f"{out} holds no finished {study.kind} runs (runs/*/{' and '.join(study.finished)})"
+        )
+    return saved, runs
+
+
+def _read(file: Path) -> Any:
+    from farsighter.plots import read_csv
+
+    if not file.exists():
+        return None
+    if file.suffix == ".csv":
+        return read_csv(file)
+    if file.suffix == ".npy":
+        return np.load(file)
+    return json.loads(file.read_text())
+
+
+@contextmanager
+def figure(file: Path, *args: Any, **kwargs: Any) -> Iterator[tuple[Any, Any]]:
+    """``plt.subplots(*args, **kwargs)``, saved to ``file`` when the block ends."""
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    fig, axes = plt.subplots(*args, **kwargs)
+    try:
+        yield fig, axes
+        fig.tight_layout()
+        fig.savefig(file, dpi=120)
+    finally:
+        plt.close(fig)
+
+
+def band(ax: Any, x: np.ndarray, curves: np.ndarray, color: Any, label: str | None) -> None:
+    """The mean over seeds (rows of ``curves``, NaN where a seed has no value) and a band of one
+    standard deviation."""
+    with warnings.catch_warnings():  # a point where every seed is NaN stays NaN
+        warnings.simplefilter("ignore", RuntimeWarning)
+        mean, std = np.nanmean(curves, axis=0), np.nanstd(curves, axis=0)
+    ax.plot(x, mean, color=color, label=label)
+    ax.fill_between(x, mean - std, mean + std, color=color, alpha=0.15)
+
+
+def finish_axes(ax: Any, xlabel: str, ylabel: str, title: str, **legend: Any) -> None:
+    """Labels, title, legend and grid of a curve plot."""
+    ax.set_xlabel(xlabel)
+    ax.set_ylabel(ylabel)
+    ax.set_title(title)
+    ax.legend(fontsize=8, **legend)
+    ax.grid(alpha=0.3)

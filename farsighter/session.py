@@ -1,0 +1,335 @@
+"""A run in progress, beside its directory (:mod:`farsighter.rundir`): the loop's counters, the
+checkpoint schema (save and restore), what is logged per episode and per interval, evaluation,
+and the summary. :func:`farsighter.train.train` composes these into the loop.
+"""
+
+from __future__ import annotations
+
+import json
+import pickle
+import time
+from collections import deque
+from collections.abc import Mapping
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any
+
+import gymnasium as gym
+import numpy as np
+import torch
+from tqdm import tqdm
+
+from farsighter.agents import Agent
+from farsighter.config import Config
+from farsighter.errors import RunDirError
+from farsighter.rundir import SUMMARY_FILE, RunLogger, load_checkpoint, save_checkpoint
+
+CHECKPOINT_VERSION = 2  # 2: agents save their counters as one dataclass (v0.3)
+RECENT = 20  # episodes in the progress bar's and the summary's recent mean
+
+
+@dataclass
+class LoopState:
+    """Counters of the loop, saved in checkpoints as a whole."""
+
+    global_step: int = 0
+    episodes: int = 0
+    evals: int = 0
+    best_eval: float = float("-inf")
+    last_eval: float = float("nan")
+    loss_value: float = float("nan")  # the TD loss read at the latest log interval
+    recent_returns: deque[float] = field(default_factory=lambda: deque(maxlen=RECENT))
+    recent_successes: deque[float] = field(default_factory=lambda: deque(maxlen=RECENT))
+
+    def to_dict(self) -> dict[str, Any]:
+        out = dict(vars(self))
+        out["recent_returns"], out["recent_successes"] = (
+            list(self.recent_returns),
+            list(self.recent_successes),
+        )
+        return out
+
+    @classmethod
+    def from_dict(cls, data: Mapping[str, Any]) -> LoopState:
+        state = cls(**{k: v for k, v in data.items() if not k.startswith("recent_")})
+        state.recent_returns.extend(data["recent_returns"])
+        state.recent_successes.extend(data["recent_successes"])
+        return state
+
+
+def crossed(before: int, after: int, every: int) -> bool:
+    """True when a multiple of ``every`` lies in (before, after]; never when ``every`` is 0."""
+    return bool(every) and before // every < after // every
+
+
+# --------------------------------------------------------------------------------------------
+# Checkpoints: the loop's counters, the agent, and the environments with their observation.
+# --------------------------------------------------------------------------------------------
+
+
+def save_run(
+    path: Path, cfg: Config, state: LoopState, agent: Agent, envs: gym.vector.VectorEnv, obs: Any
+) -> None:
+    save_checkpoint(
+        path,
+        {
+            "version": CHECKPOINT_VERSION,
+            "loop": state.to_dict(),
+            "agent": agent.state_dict(include_replay=cfg.save_replay),
+            # Environment state only travels with the replay, whose rows it continues.
+            "envs": _pickle_envs(envs) if cfg.save_replay else None,
+            "obs": obs,
+        },
+    )
+
+
+def restore_run(
+    path: Path, cfg: Config, agent: Agent, envs: gym.vector.VectorEnv
+) -> tuple[LoopState, gym.vector.VectorEnv, Any]:
+    """Load the last checkpoint into ``agent``; returns the loop state, the environments (those
+    saved, or ``envs`` reset to fresh episodes when they were not) and the observation."""
+    checkpoint = load_checkpoint(path)
+    version = checkpoint.get("version", 1)
+    if version != CHECKPOINT_VERSION:
+        raise RunDirError(
+            f"checkpoint in {path} has format {version}, this version reads format "
+            f"{CHECKPOINT_VERSION}; finish it with the version that wrote it or start afresh "
+            "with --overwrite"
+        )
+    agent.load_state_dict(checkpoint["agent"])
+    state = LoopState.from_dict(checkpoint["loop"])
+    if checkpoint.get("envs") is None:  # environment state was not saved: fresh episodes
+        obs, _ = envs.reset(seed=cfg.seed + state.global_step)
+        return state, envs, obs
+    envs.close()
+    return state, pickle.loads(checkpoint["envs"]), checkpoint["obs"]
+
+
+def _pickle_envs(envs: gym.vector.VectorEnv) -> bytes | None:
+    try:
+        return pickle.dumps(envs)
+    except Exception:  # e.g. an environment holding an open window or a C handle
+        return None
+
+
+# --------------------------------------------------------------------------------------------
+# Evaluation.
+# --------------------------------------------------------------------------------------------
+
+
+@dataclass
+class EvalResult:
+    """Returns of the evaluation episodes, and ``info["is_success"]`` at each episode's end
+    (goal-conditioned tasks; empty when the environment does not report it)."""
+
+    returns: list[float]
+    successes: list[float]
+
+
+def evaluate_episodes(
+    agent: Agent, cfg: Config, env: gym.Env, episodes: int, seed: int, global_step: int
+) -> EvalResult:
+    """Greedy episodes (eval_epsilon-greedy for discrete actions; the posterior mean / noiseless
+    mu for continuous ones) on an unclipped, non-life-loss environment."""
+    rng = np.random.default_rng(seed)
+    returns: list[float] = []
+    successes: list[float] = []
+    n_actions = int(env.action_space.n) if isinstance(env.action_space, gym.spaces.Discrete) else 0
+    for i in range(episodes):
+        obs, info = env.reset(seed=seed if i == 0 else None)
+        total, steps, done = 0.0, 0, False
+        while not done and steps < cfg.eval_max_steps:
+            if n_actions and rng.random() < cfg.eval_epsilon:
+                action = int(rng.integers(n_actions))
+            else:
+                action = agent.act(np.asarray(obs)[None], global_step, explore=False)[0]
+            obs, reward, terminated, truncated, info = env.step(action)
+            total += float(reward)
+            steps += 1
+            done = terminated or truncated
+        returns.append(total)
+        if "is_success" in info:
+            successes.append(float(info["is_success"]))
+    return EvalResult(returns, successes)
+
+
+# --------------------------------------------------------------------------------------------
+# What a run writes as it goes.
+# --------------------------------------------------------------------------------------------
+
+
+def final_observations(info: dict[str, Any], num_envs: int) -> list[Any] | None:
+    """The last observation of each environment whose episode ended at this step (else None)."""
+    if "final_obs" not in info:
+        return None
+    mask = info["_final_obs"]
+    return [info["final_obs"][i] if mask[i] else None for i in range(num_envs)]
+
+
+def finished_episodes(info: dict[str, Any]) -> list[tuple[float, int, float | None]]:
+    """(return, length, ``info["is_success"]`` or None) of the episodes that ended this step."""
+    final = info.get("final_info")
+    if not final or "episode" not in final:
+        return []
+    ep, has_success = final["episode"], final.get("_is_success")
+    return [
+        (
+            float(ep["r"][i]),
+            int(ep["l"][i]),
+            float(final["is_success"][i]) if has_success is not None and has_success[i] else None,
+        )
+        for i in np.flatnonzero(final["_episode"])
+    ]
+
+
+class RunLog:
+    """Episode rows, log-interval scalars (SPS, loss, diagnostics), evaluations, the progress
+    bar and the summary of one run; reopened consistently on resume."""
+
+    def __init__(self, path: Path, cfg: Config, state: LoopState, resumed: bool) -> None:
+        self.path, self.cfg = path, cfg
+        self.logger = RunLogger(path, resume_step=state.global_step if resumed else None)
+        self.eval_env = _make_eval_env(cfg)
+        self.bar = tqdm(
+            total=cfg.total_steps,
+            initial=state.global_step,
+            unit="step",
+            disable=not cfg.progress,
+            dynamic_ncols=True,
+            mininterval=1.0,
+            desc=f"{cfg.algo} {cfg.env} s{cfg.seed}",
+        )
+        now = time.perf_counter()
+        self.start = self.window = (state.global_step, now)
+        self.loop_end = now
+        # Training-phase throughput: measured from the first step at or after learning_starts.
+        self.train_phase: tuple[int, float] | None = None
+        self.next_log = (state.global_step // cfg.log_every + 1) * cfg.log_every
+        self.sps = 0.0
+        self.last_loss: torch.Tensor | None = None
+
+    def step(
+        self, state: LoopState, info: dict[str, Any], metrics: dict[str, torch.Tensor], agent: Agent
+    ) -> None:
+        """After one vector step: episodes that ended, and the log interval when it is due."""
+        self.bar.update(self.cfg.num_envs)
+        if self.train_phase is None and state.global_step >= self.cfg.learning_starts:
+            self.train_phase = (state.global_step, time.perf_counter())
+        self.last_loss = metrics.get("td_loss", self.last_loss)
+        for ep_return, ep_length, success in finished_episodes(info):
+            self.episode(state, ep_return, ep_length, success, agent)
+        if state.global_step >= self.next_log:
+            self.interval(state, agent)
+
+    def episode(
+        self,
+        state: LoopState,
+        ep_return: float,
+        ep_length: int,
+        success: float | None,
+        agent: Agent,
+    ) -> None:
+        state.episodes += 1
+        log, step = self.logger, state.global_step
+        if success is not None:  # goal-conditioned tasks: success.csv, not metrics.csv
+            state.recent_successes.append(success)
+            log.success({"global_step": step, "episode": state.episodes, "success": success})
+            log.scalar("charts/success_rate", float(np.mean(state.recent_successes)), step)
+        state.recent_returns.append(ep_return)
+        diag = agent.diagnostics()
+        log.metrics.write(
+            {
+                "global_step": step,
+                "episode": state.episodes,
+                "episodic_return": ep_return,
+                "episodic_length": ep_length,
+                "SPS": self.sps,
+                "loss": state.loss_value,
+                "epsilon": diag.get("epsilon", float("nan")),
+                "k": diag.get("k", float("nan")),
+            }
+        )
+        log.scalar("charts/episodic_return", ep_return, step)
+        log.scalar("charts/episodic_length", ep_length, step)
+
+    def interval(self, state: LoopState, agent: Agent) -> None:
+        """SPS, the TD loss (one host sync per interval, not per step) and the diagnostics."""
+        log, step, now = self.logger, state.global_step, time.perf_counter()
+        self.sps = (step - self.window[0]) / max(now - self.window[1], 1e-9)
+        self.window = (step, now)
+        self.next_log += self.cfg.log_every
+        log.scalar("charts/SPS", self.sps, step)
+        loss = self.last_loss
+        state.loss_value = float(loss.item()) if loss is not None else float("nan")
+        if loss is not None:
+            log.scalar("losses/td_loss", state.loss_value, step)
+        for name, value in agent.diagnostics().items():
+            log.scalar(f"charts/{name}", value, step)
+        recent = np.mean(state.recent_returns) if state.recent_returns else float("nan")
+        self.bar.set_postfix(SPS=f"{self.sps:.0f}", ret=f"{recent:.1f}", refresh=False)
+
+    def evaluate(self, state: LoopState, agent: Agent) -> None:
+        """One evaluation phase: eval.csv, eval_success.csv (goal tasks) and TensorBoard."""
+        cfg, log, step = self.cfg, self.logger, state.global_step
+        state.evals += 1
+        seed = cfg.seed + 7919 * state.evals
+        result = evaluate_episodes(agent, cfg, self.eval_env, cfg.eval_episodes, seed, step)
+        mean, std = float(np.mean(result.returns)), float(np.std(result.returns))
+        if result.successes:
+            rate = float(np.mean(result.successes))
+            row = {"global_step": step, "eval_success_rate": rate}
+            log.success({**row, "eval_episodes": len(result.successes)}, evaluation=True)
+            log.scalar("eval/success_rate", rate, step)
+        state.last_eval, state.best_eval = mean, max(state.best_eval, mean)
+        log.eval.write(
+            {
+                "global_step": step,
+                "eval_return_mean": mean,
+                "eval_return_std": std,
+                "eval_episodes": len(result.returns),
+            }
+        )
+        log.scalar("eval/mean_return", mean, step)
+        log.scalar("eval/std_return", std, step)
+
+    def end_of_training(self) -> None:
+        """Marks the end of the steps (the final evaluation and checkpoint do not count in SPS)."""
+        self.loop_end = time.perf_counter()
+
+    def summary(self, state: LoopState) -> dict[str, Any]:
+        """The run's summary, also written to summary.json."""
+        elapsed = time.perf_counter() - self.start[1]
+        phase = self.train_phase
+        train_sps = (
+            (state.global_step - phase[0]) / max(self.loop_end - phase[1], 1e-9)
+            if phase is not None and state.global_step > phase[0]
+            else float("nan")
+        )
+        recent = state.recent_returns
+        summary = {
+            "algo": self.cfg.algo,
+            "env": self.cfg.env,
+            "seed": self.cfg.seed,
+            "global_step": state.global_step,
+            "episodes": state.episodes,
+            "final_eval_return": state.last_eval,
+            "best_eval_return": state.best_eval,
+            "mean_recent_return": float(np.mean(recent)) if recent else None,
+            "wall_seconds": elapsed,
+            "sps": (state.global_step - self.start[0]) / max(elapsed, 1e-9),
+            "train_phase_sps": train_sps,
+            "run_dir": str(self.path),
+        }
+        (self.path / SUMMARY_FILE).write_text(json.dumps(summary, indent=2) + "\n")
+        return summary
+
+    def close(self) -> None:
+        self.bar.close()
+        self.logger.close()
+        self.eval_env.close()
+
+
+def _make_eval_env(cfg: Config) -> gym.Env:
+    from farsighter.envs import make_env
+
+    return make_env(cfg, seed=cfg.seed + 1_000_003, training=False)
