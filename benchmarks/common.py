@@ -5,14 +5,55 @@ from __future__ import annotations
 import json
 import os
 import platform
+import shlex
 import sys
 import time
-from pathlib import Path
+from collections.abc import Sequence
+from pathlib import Path, PurePath
 from typing import Any
 
 import torch
 
 RESULTS = Path(__file__).resolve().parent / "results"
+REPO = Path(__file__).resolve().parent.parent
+
+
+def relative_command(
+    argv: Sequence[str], root: PurePath, executable: str = "python", module: bool | None = None
+) -> str:
+    """The command line ``argv`` written relative to the repository ``root``.
+
+    ``argv[0]`` inside the root becomes ``-m package.module`` when the script ran as a module
+    (``module``; by default, when ``argv[0]`` is absolute, as ``python -m`` makes it), else its
+    relative path; every other absolute path inside the root (``--out=/repo/x`` too) becomes
+    relative. Pure: no file system access.
+    """
+
+    def inside(arg: str) -> PurePath | None:
+        path = PurePath(arg)
+        if path.is_absolute() and path.is_relative_to(root):
+            return path.relative_to(root)
+        return None
+
+    def rel(arg: str) -> str:
+        flag, eq, value = arg.partition("=")
+        if eq and flag.startswith("-"):
+            return flag + eq + rel(value)
+        relative = inside(arg)
+        return arg if relative is None else relative.as_posix()
+
+    if not argv:
+        return executable
+    script, *rest = argv
+    relative = inside(script)
+    if relative is not None and relative.suffix == ".py" and module is not False:
+        parts = list(relative.with_suffix("").parts)
+        if parts[-1] == "__main__" and len(parts) > 1:
+            parts.pop()
+        head = ["-m", ".".join(parts)]
+    else:
+        head = [rel(script)]
+    return shlex.join([executable, *head, *(rel(a) for a in rest)])
 
 
 def machine() -> dict[str, Any]:
@@ -32,7 +73,15 @@ def machine() -> dict[str, Any]:
 def write_result(name: str, figures: dict[str, Any]) -> Path:
     RESULTS.mkdir(parents=True, exist_ok=True)
     payload = {
-        "command": " ".join([Path(sys.executable).name, *sys.argv]),
+        # relative to the repository: the same line runs from any checkout
+        "command": relative_command(
+            [os.path.realpath(sys.argv[0]), *sys.argv[1:]]
+            if os.path.isfile(sys.argv[0])
+            else sys.argv,
+            REPO,
+            executable=Path(sys.executable).name,
+            module=getattr(sys.modules["__main__"], "__spec__", None) is not None,
+        ),
         "date": time.strftime("%Y-%m-%d %H:%M:%S"),
         "machine": machine(),
         **figures,

@@ -19,6 +19,7 @@ import torch
 from benchmarks.common import write_result
 from farsighter import make_config
 from farsighter.agents.farsighter import FarsighterAgent
+from farsighter.replay import VectorStep
 
 
 def build(mode: str, samples: int, threads: int) -> FarsighterAgent:
@@ -44,7 +45,7 @@ def build(mode: str, samples: int, threads: int) -> FarsighterAgent:
             rng.integers(0, 255, size=(84, 84), dtype=np.uint8) if i < 64 else frame[0, -1]
         )
         frame[0, -1, i % 84, :] = i % 255  # distinct frames without 100k random draws
-        agent.observe(frame, np.array([i % 18]), np.array([0.0]), no, no, None)
+        agent.observe(VectorStep(frame, np.array([i % 18]), np.array([0.0]), no, no, None))
     return agent
 
 

@@ -71,7 +71,12 @@ RUNS: dict[str, tuple[str, str, int, dict[str, Any]]] = {
         {**CARTPOLE, "preset": "bdqn", "target_update_every": 250},
     ),
     "farsighter-cartpole": ("farsighter", "CartPole-v1", 3_000, CARTPOLE),
-    "farsighter-stride-cartpole": ("farsighter", "CartPole-v1", 3_000, {**CARTPOLE, "stride": True}),
+    "farsighter-stride-cartpole": (
+        "farsighter",
+        "CartPole-v1",
+        3_000,
+        {**CARTPOLE, "stride": True},
+    ),
     "farsighter-adaptive-cartpole": ("farsighter", "CartPole-v1", 3_000, {**CARTPOLE, **ADAPTIVE}),
     "farsighter-incremental-cartpole": (
         "farsighter",
@@ -103,7 +108,11 @@ RUNS: dict[str, tuple[str, str, int, dict[str, Any]]] = {
 def _leaves(state: Any) -> list[bytes]:
     """Bytes of every floating-point tensor / array in a nested state (order-free)."""
     if isinstance(state, torch.Tensor):
-        return [state.detach().cpu().contiguous().numpy().tobytes()] if state.is_floating_point() else []
+        return (
+            [state.detach().cpu().contiguous().numpy().tobytes()]
+            if state.is_floating_point()
+            else []
+        )
     if isinstance(state, np.ndarray):
         return [np.ascontiguousarray(state).tobytes()] if state.dtype.kind == "f" else []
     if isinstance(state, dict):
@@ -163,7 +172,9 @@ def main() -> None:
         figures["all_identical"] = all(same.values()) and len(same) == len(runs)
     write_result(args.name, figures)
     if args.compare and not figures["all_identical"]:
-        raise SystemExit("trained weights differ: " + ", ".join(n for n, s in same.items() if not s))
+        raise SystemExit(
+            "trained weights differ: " + ", ".join(n for n, s in same.items() if not s)
+        )
 
 
 if __name__ == "__main__":

@@ -5,12 +5,19 @@ Bad input prints one line, ``farsighter: error: <what> ...(accepted: ...)``, and
 
 from __future__ import annotations
 
-import argparse
+import dataclasses
 import json
 import sys
 from collections.abc import Callable, Sequence
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Annotated
 
-from farsighter.errors import FarsighterError
+import tyro
+
+from farsighter.config import Config, load_config, make_config, resolve_preset_name
+from farsighter.errors import FarsighterError, RunDirError
+from farsighter.rundir import CONFIG_FILE
 
 USAGE = """usage: farsighter <command> [options]
 
@@ -19,56 +26,98 @@ commands:
   robotics  the continuous-control study (Fig. 3, Table 3):
             farsighter robotics --env Walker2d-v5 --steps 30000 --seeds 1 2 3 [--quick]
   train     train an agent:   farsighter train --algo farsighter --env CartPole-v1 [--help]
+            continue a run:   farsighter train --run-dir DIR --resume [--total-steps N]
   eval      evaluate a run:   farsighter eval RUN_DIR [--episodes 10]
   plot      draw a run's learning curve:  farsighter plot RUN_DIR
   presets   list the named presets and their sources
 """
 
 
-def _split_known(argv: Sequence[str], names: Sequence[str]) -> tuple[dict[str, str], list[str]]:
-    """Pull ``--name value`` / ``--name=value`` for the given names out of argv."""
-    found: dict[str, str] = {}
-    rest: list[str] = []
-    i = 0
-    while i < len(argv):
-        arg = argv[i]
-        key, eq, value = arg.partition("=")
-        name = key[2:] if key.startswith("--") else ""
-        if name in names:
-            if eq:
-                found[name] = value
-            elif i + 1 < len(argv):
-                found[name] = argv[i + 1]
-                i += 1
-            else:
-                raise FarsighterError(f"--{name} needs a value")
-        else:
-            rest.append(arg)
-        i += 1
-    return found, rest
+@dataclass(frozen=True)
+class TrainLead:
+    """The flags ``farsighter train`` reads before the others: they choose the default config."""
+
+    algo: str = Config.algo
+    """Algorithm whose values start the config."""
+    env: str = Config.env
+    """Environment id (chooses the ``auto`` preset)."""
+    preset: str = Config.preset
+    """Preset of the defaults (auto: by environment and algorithm)."""
+    seed: int = Config.seed
+    """Seed (with --resume and no --run-dir: names the run directory to continue)."""
+    run_dir: str = Config.run_dir
+    """Run directory (with --resume: the run to continue)."""
+    resume: bool = Config.resume
+    """Continue the run in run_dir with its saved config."""
+
+
+@dataclass(frozen=True)
+class EvalArgs:
+    """Evaluate a trained run greedily and print the returns as JSON."""
+
+    run_dir: Annotated[str, tyro.conf.Positional, tyro.conf.arg(metavar="RUN_DIR")]
+    """Run directory written by ``farsighter train``."""
+    episodes: int = 10
+    """Evaluation episodes (>= 1)."""
+    seed: int = 12345
+    """Seed of the evaluation environment."""
+    device: str = "cpu"
+    """cpu, cuda, cuda:N or auto."""
+
+
+@dataclass(frozen=True)
+class PlotArgs:
+    """Draw a run's learning curve (training episode returns and evaluation returns)."""
+
+    run_dir: Annotated[str, tyro.conf.Positional, tyro.conf.arg(metavar="RUN_DIR")]
+    """Run directory written by ``farsighter train``."""
+    out: Annotated[str | None, tyro.conf.arg(metavar="PATH")] = None
+    """PNG path (default RUN_DIR/learning_curve.png)."""
+
+
+def _without_help(argv: Sequence[str]) -> list[str]:
+    return [a for a in argv if a not in ("-h", "--help")]
+
+
+def train_config(argv: Sequence[str]) -> Config:
+    """The config of ``farsighter train ARGV``, in two tyro passes.
+
+    The first pass reads only :class:`TrainLead` (every other flag is left for later) to build
+    the default: ``make_config(algo, env, preset)``, or with ``--resume`` the config saved in the
+    run directory (``--run-dir``, else ``runs/<env>__<algo>__s<seed>``). The second pass parses
+    the whole command line over :class:`Config` with that default, so ``--help`` lists every
+    field and each given flag overrides one field; a changed field that a resume may not change
+    is refused by :func:`farsighter.rundir.prepare_run_dir`.
+    """
+    prog = "farsighter train"
+    lead, _ = tyro.cli(TrainLead, args=_without_help(argv), prog=prog, return_unknown_args=True)
+    if lead.resume:
+        path = (
+            Path(lead.run_dir)
+            if lead.run_dir
+            else Config(algo=lead.algo, env=lead.env, seed=lead.seed).default_run_dir()
+        )
+        if not (path / CONFIG_FILE).is_file():
+            raise RunDirError(f"cannot resume: {path} holds no run (no {CONFIG_FILE})")
+        default = dataclasses.replace(
+            load_config(path / CONFIG_FILE), resume=True, overwrite=False, run_dir=str(path)
+        )
+        description = f"Continue the run in {path}: its saved config is the default below; "
+        description += "give only the flags that change (such as --total-steps)."
+    else:
+        default = make_config(lead.algo, lead.env, lead.preset)
+        description = "Train an agent. --algo, --env and --preset pick the defaults; any other "
+        description += "field below overrides them. --resume continues a run with its saved config."
+    cfg = tyro.cli(Config, default=default, args=list(argv), prog=prog, description=description)
+    if cfg.preset != default.preset:  # given again: store the resolved name, as make_config does
+        cfg = dataclasses.replace(cfg, preset=resolve_preset_name(cfg.preset, cfg.env, cfg.algo))
+    return cfg
 
 
 def cmd_train(argv: Sequence[str]) -> int:
-    import tyro
-
-    from farsighter.config import Config, make_config
     from farsighter.train import train
 
-    # algo, env and preset choose the defaults (algorithm defaults <- preset), so they are read
-    # first; every other flag then overrides a field of that default.
-    known, rest = _split_known(argv, ("algo", "env", "preset"))
-    default = make_config(
-        known.get("algo", "ddqn"), known.get("env", "CartPole-v1"), known.get("preset", "auto")
-    )
-    cfg = tyro.cli(
-        Config,
-        default=default,
-        args=list(rest),
-        prog="farsighter train",
-        description="Train an agent. --algo, --env and --preset pick the defaults; any other "
-        "field below overrides them.",
-    )
-    summary = train(cfg)
+    summary = train(train_config(argv))
     print(json.dumps(summary, indent=2))
     return 0
 
@@ -78,12 +127,7 @@ def cmd_eval(argv: Sequence[str]) -> int:
 
     from farsighter.train import evaluate_episodes, load_agent
 
-    parser = argparse.ArgumentParser(prog="farsighter eval", description="Evaluate a trained run.")
-    parser.add_argument("run_dir")
-    parser.add_argument("--episodes", type=int, default=10)
-    parser.add_argument("--seed", type=int, default=12345)
-    parser.add_argument("--device", default="cpu")
-    args = parser.parse_args(list(argv))
+    args = tyro.cli(EvalArgs, args=list(argv), prog="farsighter eval")
     if args.episodes < 1:
         raise FarsighterError(f"--episodes must be >= 1 (got {args.episodes})")
     policy = load_agent(args.run_dir, device=args.device)
@@ -107,25 +151,33 @@ def cmd_eval(argv: Sequence[str]) -> int:
 def cmd_plot(argv: Sequence[str]) -> int:
     from farsighter.plots import plot_run
 
-    parser = argparse.ArgumentParser(prog="farsighter plot", description="Draw a run's curves.")
-    parser.add_argument("run_dir")
-    parser.add_argument("--out", default=None, help="PNG path (default RUN_DIR/learning_curve.png)")
-    args = parser.parse_args(list(argv))
+    args = tyro.cli(PlotArgs, args=list(argv), prog="farsighter plot")
     print(plot_run(args.run_dir, args.out))
     return 0
 
 
-def cmd_presets(argv: Sequence[str]) -> int:
-    from farsighter.config import ALGO_PINNED, PRESETS
+@dataclass(frozen=True)
+class PresetsArgs:
+    """List the named presets with their sources, then every algorithm with the values that
+    define it. A config is built as: field defaults <- preset <- algorithm <- your flags (a
+    preset made for one algorithm, such as bdqn, comes after that algorithm's values)."""
 
+
+def cmd_presets(argv: Sequence[str]) -> int:
+    from farsighter import algorithms
+    from farsighter.config import PRESETS
+
+    tyro.cli(PresetsArgs, args=list(argv), prog="farsighter presets")
     for p in PRESETS.values():
-        print(f"{p.name}: {p.doc}\n  source: {p.source}")
+        only = f" (for --algo {p.algo} only; applied over its values)" if p.algo else ""
+        print(f"{p.name}{only}: {p.doc}\n  source: {p.source}")
         for key, value in p.values.items():
             print(f"    {key} = {value!r}")
-    print("applied after any preset (algorithm-defining; your flags still override them):")
-    for algo, values in ALGO_PINNED.items():
-        for key, value in values.items():
-            print(f"    {algo}: {key} = {value!r}")
+    print("\nalgorithms (their values apply after a preset; your flags still override them):")
+    for algo in algorithms.TABLE:
+        print(f"{algo.name} [{algo.actions} actions]: {algo.summary}")
+        for key, value in algo.defaults.items():
+            print(f"    {key} = {value!r}")
     return 0
 
 

@@ -37,7 +37,8 @@ SUCCESS_COLUMNS = ("global_step", "episode", "success")
 EVAL_SUCCESS_FILE = "eval_success.csv"
 EVAL_SUCCESS_COLUMNS = ("global_step", "eval_success_rate", "eval_episodes")
 
-# Fields that may differ between the original command and its --resume.
+# Fields that may differ between the original command and its --resume: where and how the run
+# continues and how long it trains, plus bookkeeping that does not change what is learned.
 RESUMABLE_FIELDS = {
     "resume",
     "overwrite",
@@ -46,16 +47,28 @@ RESUMABLE_FIELDS = {
     "progress",
     "run_dir",
     "torch_threads",
+    "log_every",
+    "checkpoint_every",
 }
 
 
 def prepare_run_dir(cfg: Config) -> Path:
-    """Create (or reopen with ``resume``) the run directory; never overwrite unless asked."""
+    """Create (or reopen with ``resume``) the run directory; never overwrite unless asked.
+
+    A resume must match the saved config outside :data:`RESUMABLE_FIELDS`; the resumable values
+    it gives (a longer ``total_steps``, say) are recorded in config.json. A directory that cannot
+    be created or written raises :class:`RunDirError`, one line with the reason."""
     path = cfg.resolved_run_dir
+
+    def write_config(new: Config) -> None:  # atomic: a crash mid-write keeps the previous one
+        tmp = path / (CONFIG_FILE + ".tmp")
+        save_config(new, tmp)
+        os.replace(tmp, path / CONFIG_FILE)
+
     if cfg.resume and cfg.overwrite:
         raise RunDirError("--resume and --overwrite exclude each other; pass one")
     if cfg.resume:
-        if not (path / CONFIG_FILE).exists():
+        if not (path / CONFIG_FILE).is_file():
             raise RunDirError(f"cannot resume: {path} holds no run (no {CONFIG_FILE})")
         saved = load_config(path / CONFIG_FILE)
         diffs = [
@@ -69,16 +82,31 @@ def prepare_run_dir(cfg: Config) -> Path:
                 + "; ".join(diffs[:3])
                 + " (resume with the original flags, or use a new --run-dir)"
             )
+        # Record what this resume changed (where the run lives and the flags stay as saved).
+        recorded = sorted(RESUMABLE_FIELDS - {"resume", "overwrite", "run_dir"})
+        updated = dataclasses.replace(saved, **{name: getattr(cfg, name) for name in recorded})
+        if updated != saved:
+            try:
+                write_config(updated)
+            except OSError as exc:
+                raise RunDirError(
+                    f"cannot write {path / CONFIG_FILE}: {exc.strerror or exc}"
+                ) from None
         return path
-    if path.exists() and any(path.iterdir()):
-        if not cfg.overwrite:
-            raise RunDirError(
-                f"run directory {path} already exists; pass --resume to continue it or "
-                "--overwrite to replace it (or choose another --run-dir)"
-            )
-        shutil.rmtree(path)
-    path.mkdir(parents=True, exist_ok=True)
-    save_config(cfg, path / CONFIG_FILE)
+    try:
+        if path.exists() and not path.is_dir():
+            raise RunDirError(f"cannot create run directory {path}: a file of that name exists")
+        if path.exists() and any(path.iterdir()):
+            if not cfg.overwrite:
+                raise RunDirError(
+                    f"run directory {path} already exists; pass --resume to continue it or "
+                    "--overwrite to replace it (or choose another --run-dir)"
+                )
+            shutil.rmtree(path)
+        path.mkdir(parents=True, exist_ok=True)
+        write_config(cfg)
+    except OSError as exc:
+        raise RunDirError(f"cannot create run directory {path}: {exc.strerror or exc}") from None
     return path
 
 

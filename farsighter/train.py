@@ -14,6 +14,7 @@ from farsighter.agents import Agent, build_agent
 from farsighter.config import Config, load_config, validate
 from farsighter.envs import check_spaces, frame_stack_of, make_env, make_vector_env
 from farsighter.errors import ConfigError, RunDirError
+from farsighter.replay import VectorStep
 from farsighter.rundir import CONFIG_FILE, load_checkpoint, prepare_run_dir
 from farsighter.session import (
     EvalResult,
@@ -73,7 +74,7 @@ def train(cfg: Config, callbacks: Sequence[Callback] = ()) -> dict[str, Any]:
             actions = agent.act(obs, state.global_step)
             next_obs, rewards, terminated, truncated, info = envs.step(actions)
             final_obs = final_observations(info, cfg.num_envs)
-            agent.observe(obs, actions, rewards, terminated, truncated, final_obs)
+            agent.observe(VectorStep(obs, actions, rewards, terminated, truncated, final_obs))
             obs = next_obs
             prev_step, state.global_step = state.global_step, state.global_step + cfg.num_envs
             metrics = agent.learn(state.global_step)

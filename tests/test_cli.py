@@ -59,9 +59,16 @@ def test_train_eval_and_presets(tmp_path: Path) -> None:
     saved = json.loads((tmp_path / "run" / "config.json").read_text())
     assert saved["k"] == 5 and saved["blr"]["prior_std"] == 0.5 and saved["preset"] == "cartpole"
     assert saved["optimizer"] == "adam"  # from the preset, not overridden
-    res = run_cli("eval", "run", "--episodes", "2", cwd=tmp_path)
+    res = run_cli("eval", "run", "--episodes", "2", "--seed", "7", "--device", "cpu", cwd=tmp_path)
     assert res.returncode == 0, res.stderr
     assert len(json.loads(res.stdout)["returns"]) == 2
+    res = run_cli("eval", "run", "--episodes", "0", cwd=tmp_path)
+    assert res.returncode == 2 and res.stderr.strip() == (
+        "farsighter: error: --episodes must be >= 1 (got 0)"
+    )
+    res = run_cli("plot", "run", "--out", "curve.png", cwd=tmp_path)
+    assert res.returncode == 0, res.stderr
+    assert (tmp_path / "curve.png").stat().st_size > 0
     res = run_cli("presets", cwd=tmp_path)
     assert "Table 1" in res.stdout and "kazizzad/BDQN-MxNet-Gluon" in res.stdout
 
@@ -89,6 +96,31 @@ def test_bad_input_is_one_line_exit_2(tmp_path: Path, args: list[str], needle: s
     assert len(lines) == 1 and needle in lines[0], res.stderr
     assert "Traceback" not in res.stderr
     assert not (tmp_path / "run").exists()  # nothing created
+
+
+def test_run_dir_that_cannot_be_created_is_one_line_exit_2(tmp_path: Path) -> None:
+    (tmp_path / "afile").write_text("not a directory")
+    for run_dir, needle in [
+        ("afile/run", "cannot create run directory afile/run: Not a directory"),
+        ("afile", "cannot create run directory afile: a file of that name exists"),
+    ]:
+        res = run_cli(
+            "train", "--run-dir", run_dir, "--total-steps", "10", "--no-progress", cwd=tmp_path
+        )
+        assert res.returncode == 2, res.stderr
+        lines = res.stderr.strip().splitlines()
+        assert len(lines) == 1 and lines[0] == f"farsighter: error: {needle}", res.stderr
+    assert (tmp_path / "afile").read_text() == "not a directory"
+    res = run_cli("train", "--run-dir", "afile", "--resume", cwd=tmp_path)
+    assert res.returncode == 2 and res.stderr.strip() == (
+        "farsighter: error: cannot resume: afile holds no run (no config.json)"
+    )
+
+
+@pytest.mark.parametrize("command", [["eval", "missing"], ["plot", "missing"], ["eval"]])
+def test_eval_and_plot_bad_input_exit_2(tmp_path: Path, command: list[str]) -> None:
+    res = run_cli(*command, cwd=tmp_path)
+    assert res.returncode == 2 and "Traceback" not in res.stderr, res.stderr
 
 
 def test_existing_run_dir_is_never_overwritten_without_asking(tmp_path: Path) -> None:

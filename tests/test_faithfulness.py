@@ -16,7 +16,7 @@ from farsighter.agents.ddqn import DDQNAgent
 from farsighter.agents.farsighter import FarsighterAgent
 from farsighter.agents.naf import NAFAgent
 from farsighter.config import make_config
-from farsighter.replay import ReplayBuffer
+from farsighter.replay import ReplayBuffer, VectorStep
 from tests.conftest import tiny
 
 CPU = torch.device("cpu")
@@ -34,12 +34,14 @@ def feed(agent: Any, n: int, seed: int = 0, episode: int = 40, obs_dim: int = 4)
     for t in range(n):
         end = t % episode == episode - 1
         agent.observe(
-            rng.normal(size=(1, obs_dim)).astype(np.float32),
-            rng.integers(0, 2, size=1),
-            np.array([rng.normal()]),
-            np.array([end]),
-            np.array([False]),
-            [rng.normal(size=obs_dim).astype(np.float32)] if end else None,
+            VectorStep(
+                rng.normal(size=(1, obs_dim)).astype(np.float32),
+                rng.integers(0, 2, size=1),
+                np.array([rng.normal()]),
+                np.array([end]),
+                np.array([False]),
+                [rng.normal(size=obs_dim).astype(np.float32)] if end else None,
+            )
         )
 
 
@@ -127,12 +129,14 @@ def test_naf_targets_use_the_target_value(tmp_path: Path) -> None:
     for t in range(300):
         end = t % 50 == 49
         agent.observe(
-            rng.normal(size=(1, 3)).astype(np.float32),
-            rng.uniform(-2, 2, size=(1, 1)).astype(np.float32),
-            np.array([rng.normal()]),
-            np.array([False]),
-            np.array([end]),
-            [rng.normal(size=3).astype(np.float32)] if end else None,
+            VectorStep(
+                rng.normal(size=(1, 3)).astype(np.float32),
+                rng.uniform(-2, 2, size=(1, 1)).astype(np.float32),
+                np.array([rng.normal()]),
+                np.array([False]),
+                np.array([end]),
+                [rng.normal(size=3).astype(np.float32)] if end else None,
+            )
         )
     perturb(agent.net)
     t_ = minibatch(agent)
@@ -352,12 +356,12 @@ def test_naf_soft_update_every_n_steps(tmp_path: Path) -> None:
     target = [p.clone() for p in agent.net_target.parameters()]
     for step in range(1, 201):
         end = step % 50 == 0
-        agent.observe(
+        agent.observe(VectorStep(
             rng.normal(size=(1, 3)).astype(np.float32),
             rng.uniform(-2, 2, size=(1, 1)).astype(np.float32),
             np.array([rng.normal()]), np.array([False]), np.array([end]),
             [rng.normal(size=3).astype(np.float32)] if end else None,
-        )  # fmt: skip
+        ))  # fmt: skip
         agent.learn(step)
         now = list(agent.net_target.parameters())
         moved = any(not torch.equal(a, b) for a, b in zip(target, now, strict=True))

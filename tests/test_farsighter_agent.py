@@ -10,6 +10,7 @@ import numpy as np
 import torch
 
 from farsighter.agents.farsighter import FarsighterAgent
+from farsighter.replay import VectorStep
 from tests.conftest import tiny
 
 
@@ -26,12 +27,14 @@ def feed(agent: FarsighterAgent, n: int, seed: int = 0) -> None:
     for t in range(n):
         end = t % 40 == 39
         agent.observe(
-            rng.normal(size=(1, 4)).astype(np.float32),
-            rng.integers(0, 2, size=1),
-            np.array([rng.normal()]),
-            np.array([end]),
-            np.array([False]),
-            [rng.normal(size=4).astype(np.float32)] if end else None,
+            VectorStep(
+                rng.normal(size=(1, 4)).astype(np.float32),
+                rng.integers(0, 2, size=1),
+                np.array([rng.normal()]),
+                np.array([end]),
+                np.array([False]),
+                [rng.normal(size=4).astype(np.float32)] if end else None,
+            )
         )
 
 

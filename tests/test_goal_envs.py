@@ -18,7 +18,7 @@ from farsighter.config import Config
 from farsighter.envs import check_spaces, make_env
 from farsighter.envs.factory import goal_spec
 from farsighter.errors import EnvError
-from farsighter.replay import FINAL
+from farsighter.replay import FINAL, VectorStep
 from farsighter.replay.her import episode_last_rows, relabel_future
 from tests.conftest import tiny
 
@@ -86,12 +86,14 @@ def test_hindsight_relabelling_uses_future_achieved_goals(tmp_path: Path) -> Non
         action = env.action_space.sample()
         nxt, reward, term, trunc, _ = env.step(action)
         agent.observe(
-            obs[None],
-            action[None],
-            np.array([reward]),
-            np.array([term]),
-            np.array([trunc]),
-            [nxt] if term or trunc else None,
+            VectorStep(
+                obs[None],
+                action[None],
+                np.array([reward]),
+                np.array([term]),
+                np.array([trunc]),
+                [nxt] if term or trunc else None,
+            )
         )
         obs = nxt if not (term or trunc) else env.reset()[0]
     replay, spec = agent.replay, agent.her

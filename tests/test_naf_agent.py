@@ -15,6 +15,7 @@ from farsighter.agents.naf import NAFAgent
 from farsighter.config import Config
 from farsighter.ops.bayes_layer import BayesianLinear
 from farsighter.ops.naf import naf_q, naf_td_target
+from farsighter.replay import VectorStep
 from tests.conftest import tiny
 
 OBS = gym.spaces.Box(-np.inf, np.inf, (3,), np.float32)
@@ -40,12 +41,14 @@ def fill(agent: NAFAgent, steps: int = 300, seed: int = 0) -> None:
     for t in range(steps):
         end = t % 40 == 39
         agent.observe(
-            rng.normal(size=(1, 3)).astype(np.float32),
-            rng.uniform(ACT.low, ACT.high, size=(1, 2)).astype(np.float32),
-            np.array([rng.normal()]),
-            np.array([end and t % 80 == 79]),
-            np.array([end and t % 80 != 79]),
-            [rng.normal(size=3).astype(np.float32)] if end else None,
+            VectorStep(
+                rng.normal(size=(1, 3)).astype(np.float32),
+                rng.uniform(ACT.low, ACT.high, size=(1, 2)).astype(np.float32),
+                np.array([rng.normal()]),
+                np.array([end and t % 80 == 79]),
+                np.array([end and t % 80 != 79]),
+                [rng.normal(size=3).astype(np.float32)] if end else None,
+            )
         )
 
 

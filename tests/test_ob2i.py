@@ -26,6 +26,7 @@ from farsighter.agents.ob2i import (
 from farsighter.config import make_config, validate
 from farsighter.errors import ConfigError
 from farsighter.networks import make_torso
+from farsighter.replay import VectorStep
 from tests.conftest import GrabAgent, tiny
 
 # A three-step episode, K = 2 heads, A = 2 actions, gamma = 0.9, beta = 0.5.
@@ -101,12 +102,14 @@ def _fill(agent: OB2IAgent, lengths: list[int], seed: int = 0) -> None:
         for t in range(length):
             last = t == length - 1
             agent.observe(
-                rng.normal(size=(1, 4)).astype(np.float32),
-                np.array([rng.integers(2)]),
-                np.array([1.0]),
-                np.array([last]),
-                np.array([False]),
-                [rng.normal(size=4).astype(np.float32)] if last else None,
+                VectorStep(
+                    rng.normal(size=(1, 4)).astype(np.float32),
+                    np.array([rng.integers(2)]),
+                    np.array([1.0]),
+                    np.array([last]),
+                    np.array([False]),
+                    [rng.normal(size=4).astype(np.float32)] if last else None,
+                )
             )
 
 
@@ -265,11 +268,11 @@ def test_one_head_per_episode_and_environment(tmp_path: Path) -> None:
     acts = agent.act(obs, global_step=10_000)
     assert list(acts) == [int(q[i, heads[i]].argmax()) for i in range(3)]
     none = np.zeros(3, bool)
-    agent.observe(obs, acts, np.ones(3), none, none, None)
+    agent.observe(VectorStep(obs, acts, np.ones(3), none, none, None))
     assert np.array_equal(agent.head_E, heads)  # no episode ended: same heads
     ended = np.array([True, True, True])
     for _ in range(5):
-        agent.observe(obs, acts, np.ones(3), ended, none, list(obs))
+        agent.observe(VectorStep(obs, acts, np.ones(3), ended, none, list(obs)))
     assert not np.array_equal(agent.head_E, heads)  # redrawn at episode ends
     mean, var = agent.q_estimate(obs)
     assert mean.shape == var.shape == (3, 2) and (var >= 0).all()

@@ -15,6 +15,7 @@ import farsighter
 from farsighter.agents.common import RunningMeanStd
 from farsighter.agents.rnd import RNDAgent
 from farsighter.config import make_config
+from farsighter.replay import VectorStep
 from tests.conftest import GrabAgent, tiny
 from tests.test_replay import fill
 
@@ -71,7 +72,7 @@ def test_observations_are_whitened_with_running_statistics(tmp_path: Path) -> No
     rng = np.random.default_rng(2)
     obs = rng.normal(5.0, 3.0, size=(400, 4)).astype(np.float32)
     for o in obs:
-        agent.observe(o[None], np.array([0]), np.array([0.0]), [False], [False], None)
+        agent.observe(VectorStep(o[None], np.array([0]), np.array([0.0]), [False], [False], None))
     assert np.allclose(agent.obs_rms.mean, obs.mean(axis=0), atol=1e-3)
     x = agent._rnd_input(torch.as_tensor(obs)).numpy()
     assert abs(x.mean()) < 0.05 and abs(x.std() - 1.0) < 0.05 and np.abs(x).max() <= 5.0

@@ -12,6 +12,7 @@ import torch
 import farsighter
 from farsighter.agents.ddqn import DDQNAgent
 from farsighter.errors import RunDirError
+from farsighter.replay import VectorStep
 from farsighter.rundir import CHECKPOINT_FILE, METRIC_COLUMNS
 from tests.conftest import tiny
 
@@ -119,12 +120,14 @@ def test_target_network_does_not_move_with_online_updates(tmp_path: Path) -> Non
     rng = np.random.default_rng(0)
     for t in range(300):
         agent.observe(
-            rng.normal(size=(1, 4)).astype(np.float32),
-            np.array([t % 2]),
-            np.array([1.0]),
-            np.array([t % 50 == 49]),
-            np.array([False]),
-            [rng.normal(size=4).astype(np.float32)] if t % 50 == 49 else None,
+            VectorStep(
+                rng.normal(size=(1, 4)).astype(np.float32),
+                np.array([t % 2]),
+                np.array([1.0]),
+                np.array([t % 50 == 49]),
+                np.array([False]),
+                [rng.normal(size=4).astype(np.float32)] if t % 50 == 49 else None,
+            )
         )
     before = {k: v.clone() for k, v in agent.q_target.state_dict().items()}
     online_before = {k: v.clone() for k, v in agent.q.state_dict().items()}

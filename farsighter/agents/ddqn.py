@@ -32,6 +32,7 @@ from farsighter.agents.protocol import AgentFactory
 from farsighter.config import Config
 from farsighter.networks import QNetwork
 from farsighter.ops.targets import double_q_target
+from farsighter.replay import VectorStep
 
 
 class DDQNAgent:
@@ -81,16 +82,8 @@ class DDQNAgent:
         """Q(s, .) for a batch of states; DDQN has no posterior, so no variance."""
         return self.q(obs_tensor(obs_B, self.device)).cpu().numpy(), None
 
-    def observe(
-        self,
-        obs_E: np.ndarray,
-        action_E: np.ndarray,
-        reward_E: np.ndarray,
-        terminated_E: np.ndarray,
-        truncated_E: np.ndarray,
-        final_obs_E: Any,
-    ) -> None:
-        self.replay.add(obs_E, action_E, reward_E, terminated_E, truncated_E, final_obs_E)
+    def observe(self, step: VectorStep) -> None:
+        self.replay.add_step(step)
 
     # ------------------------------------------------------------------ learning
     def learn(self, global_step: int) -> dict[str, torch.Tensor]:

@@ -54,7 +54,7 @@ from farsighter.config import Config
 from farsighter.networks import make_torso
 from farsighter.ops.blr import BLRHead, greedy_predictive_variance
 from farsighter.ops.targets import double_q_target
-from farsighter.replay import Batch
+from farsighter.replay import Batch, VectorStep
 
 FEATURE_CHUNK = 4_096  # rows per forward pass when computing features for a posterior refresh
 
@@ -173,18 +173,10 @@ class FarsighterAgent:
         mean_BA = phi_BD @ self.head.mean_AD.T
         return mean_BA.cpu().numpy(), self.head.predictive_var(phi_BD).cpu().numpy()
 
-    def observe(
-        self,
-        obs_E: np.ndarray,
-        action_E: np.ndarray,
-        reward_E: np.ndarray,
-        terminated_E: np.ndarray,
-        truncated_E: np.ndarray,
-        final_obs_E: Any,
-    ) -> None:
-        self.replay.add(obs_E, action_E, reward_E, terminated_E, truncated_E, final_obs_E)
+    def observe(self, step: VectorStep) -> None:
+        self.replay.add_step(step)
         if self.cfg.blr.redraw == "episode":
-            self.redraw_E |= np.logical_or(terminated_E, truncated_E)
+            self.redraw_E |= np.logical_or(step.terminated_E, step.truncated_E)
 
     # ------------------------------------------------------------------ learning
     def learn(self, global_step: int) -> dict[str, torch.Tensor]:

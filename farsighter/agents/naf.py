@@ -78,6 +78,7 @@ from farsighter.errors import ConfigError
 from farsighter.networks import MLPTorso
 from farsighter.ops.bayes_layer import BayesianLinear, elbo_terms
 from farsighter.ops.naf import NAFHead, naf_q, naf_td_target, scale_action
+from farsighter.replay import VectorStep
 
 
 class NAFNetwork(nn.Module):
@@ -270,17 +271,9 @@ class NAFAgent:
         _, var_BA = self.net.mu_layer.output_mean_var(phi_BD)
         return v_B1, var_BA.mean(dim=1, keepdim=True).cpu().numpy()
 
-    def observe(
-        self,
-        obs_E: np.ndarray,
-        action_E: np.ndarray,
-        reward_E: np.ndarray,
-        terminated_E: np.ndarray,
-        truncated_E: np.ndarray,
-        final_obs_E: Any,
-    ) -> None:
-        self.replay.add(obs_E, action_E, reward_E, terminated_E, truncated_E, final_obs_E)
-        done_E = np.logical_or(terminated_E, truncated_E)
+    def observe(self, step: VectorStep) -> None:
+        self.replay.add_step(step)
+        done_E = np.logical_or(step.terminated_E, step.truncated_E)
         if self.ou_EA.shape[0] == len(done_E):
             self.ou_EA[done_E] = 0.0  # a new episode starts the OU process afresh
 

@@ -65,7 +65,7 @@ from farsighter.agents.common import (
 from farsighter.agents.protocol import AgentFactory
 from farsighter.config import Config
 from farsighter.networks import make_torso, make_trunk
-from farsighter.replay import Episode
+from farsighter.replay import Episode, VectorStep
 
 BONUS_EPS = 1e-8  # keeps the running-std division finite when every bonus is zero
 
@@ -269,17 +269,9 @@ class OB2IAgent:
             q_BKA.var(dim=1, unbiased=False).cpu().numpy(),
         )
 
-    def observe(
-        self,
-        obs_E: np.ndarray,
-        action_E: np.ndarray,
-        reward_E: np.ndarray,
-        terminated_E: np.ndarray,
-        truncated_E: np.ndarray,
-        final_obs_E: Any,
-    ) -> None:
-        self.replay.add(obs_E, action_E, reward_E, terminated_E, truncated_E, final_obs_E)
-        ended_E = np.logical_or(terminated_E, truncated_E)
+    def observe(self, step: VectorStep) -> None:
+        self.replay.add_step(step)
+        ended_E = np.logical_or(step.terminated_E, step.truncated_E)
         if ended_E.any():  # a new head for each new episode
             self.head_E[ended_E] = self.rng.integers(0, self.num_heads, size=int(ended_E.sum()))
 

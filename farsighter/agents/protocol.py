@@ -14,6 +14,7 @@ import numpy as np
 import torch
 
 from farsighter.config import Config
+from farsighter.replay import VectorStep
 
 
 class Agent(Protocol):
@@ -24,17 +25,8 @@ class Agent(Protocol):
         (greedy, or greedy under the posterior mean)."""
         ...
 
-    def observe(
-        self,
-        obs_E: np.ndarray,
-        action_E: np.ndarray,
-        reward_E: np.ndarray,
-        terminated_E: np.ndarray,
-        truncated_E: np.ndarray,
-        final_obs_E: Any,
-    ) -> None:
-        """Record one vector step (``final_obs_E[i]`` is the last observation of an episode
-        that ended at environment i, or None)."""
+    def observe(self, step: VectorStep) -> None:
+        """Record one step of every environment."""
         ...
 
     def learn(self, global_step: int) -> dict[str, torch.Tensor]:

@@ -50,7 +50,7 @@ from farsighter.agents.protocol import AgentFactory
 from farsighter.config import Config
 from farsighter.networks import QNetwork, make_torso
 from farsighter.ops.targets import double_q_target
-from farsighter.replay import Batch
+from farsighter.replay import Batch, VectorStep
 
 STD_EPS = 1e-8
 
@@ -138,18 +138,10 @@ class RNDAgent:
         """Q(s, .) for a batch of states; no posterior, so no variance."""
         return self.q(obs_tensor(obs_B, self.device)).cpu().numpy(), None
 
-    def observe(
-        self,
-        obs_E: np.ndarray,
-        action_E: np.ndarray,
-        reward_E: np.ndarray,
-        terminated_E: np.ndarray,
-        truncated_E: np.ndarray,
-        final_obs_E: Any,
-    ) -> None:
-        self.replay.add(obs_E, action_E, reward_E, terminated_E, truncated_E, final_obs_E)
+    def observe(self, step: VectorStep) -> None:
+        self.replay.add_step(step)
         if self.whiten:  # statistics of every visited state (RND paper section 2.4)
-            self.obs_rms.update(np.asarray(obs_E))
+            self.obs_rms.update(np.asarray(step.obs_E))
 
     # ------------------------------------------------------------------ the bonus
     def _rnd_input(self, obs: torch.Tensor) -> torch.Tensor:

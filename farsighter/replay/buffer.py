@@ -38,6 +38,25 @@ TRUNCATED = np.uint8(2)
 FINAL = np.uint8(4)
 
 
+@dataclass(frozen=True)
+class VectorStep:
+    """One step of E environments, as the training loop hands it to an agent's ``observe``."""
+
+    obs_E: np.ndarray
+    """Observations the actions were chosen on, (E, *obs)."""
+    action_E: np.ndarray
+    """Actions taken, (E,) discrete or (E, A) continuous."""
+    reward_E: np.ndarray
+    """Rewards received, (E,)."""
+    terminated_E: Any
+    """True where the episode ended in a terminal state (no bootstrap), (E,)."""
+    truncated_E: Any
+    """True where the episode was cut by a time limit (bootstrap from its last state), (E,)."""
+    final_obs_E: Any = None
+    """The last observation of each environment whose episode ended at this step (else None),
+    or None when no episode ended."""
+
+
 @dataclass
 class Batch:
     """A minibatch of k-step transitions (numpy; the agent moves it to its device)."""
@@ -143,6 +162,17 @@ class ReplayBuffer:
         self.t_ep[e, slot] = self.episode_t[e]
         self.count[e] += 1
         self.episode_t[e] += 1
+
+    def add_step(self, step: VectorStep) -> None:
+        """Append one :class:`VectorStep` (see :meth:`add`)."""
+        self.add(
+            step.obs_E,
+            step.action_E,
+            step.reward_E,
+            step.terminated_E,
+            step.truncated_E,
+            step.final_obs_E,
+        )
 
     def add(
         self,

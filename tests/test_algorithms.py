@@ -1,0 +1,111 @@
+"""The algorithm table is the one list of algorithms: config resolution, validation, the spaces
+check, the presets listing and agent construction all derive from it."""
+
+from __future__ import annotations
+
+import ast
+import importlib
+from pathlib import Path
+
+import gymnasium as gym
+import numpy as np
+import pytest
+import torch
+
+from farsighter import algorithms
+from farsighter.agents import build_agent
+from farsighter.cli import main
+from farsighter.config import PRESETS, make_config
+from farsighter.envs import check_spaces
+from farsighter.errors import ConfigError, EnvError
+
+DISCRETE = gym.spaces.Discrete(2)
+BOX_ACTIONS = gym.spaces.Box(-2.0, 2.0, (1,), np.float32)
+OBS = gym.spaces.Box(-np.inf, np.inf, (4,), np.float32)
+
+
+def test_the_table_imports_nothing_heavy() -> None:
+    for module in (algorithms, importlib.import_module("farsighter.errors")):
+        tree = ast.parse(Path(str(module.__file__)).read_text())
+        imported = {
+            (node.module or "") if isinstance(node, ast.ImportFrom) else alias.name
+            for node in ast.walk(tree)
+            if isinstance(node, ast.Import | ast.ImportFrom)
+            for alias in node.names
+        }
+        assert imported <= {
+            "__future__",
+            "collections.abc",
+            "dataclasses",
+            "typing",
+            "farsighter.errors",
+        }
+
+
+@pytest.mark.parametrize("algo", algorithms.NAMES)
+def test_every_algorithm_builds_its_agent_from_the_table(algo: str) -> None:
+    spec = algorithms.get(algo)
+    cfg = make_config(algo, "Pendulum-v1" if spec.actions == "continuous" else "CartPole-v1")
+    acts = BOX_ACTIONS if spec.actions == "continuous" else DISCRETE
+    agent = build_agent(cfg, OBS, acts, frame_stack=1, device=torch.device("cpu"))
+    module = importlib.import_module(f"farsighter.agents.{spec.agent}")
+    assert type(agent) is module.AGENT
+    assert agent.act(np.zeros((2, 4), np.float32), 0).shape[0] == 2
+    assert agent.diagnostics().get("k", 1.0) == cfg.k
+
+
+def test_unknown_algorithm_lists_the_table() -> None:
+    with pytest.raises(ConfigError, match="accepted: " + ", ".join(algorithms.NAMES)):
+        make_config("dqn")
+
+
+def test_spaces_check_names_every_algorithm_of_the_other_kind() -> None:
+    with pytest.raises(EnvError) as err:
+        check_spaces("naf", OBS, DISCRETE)
+    for name in algorithms.names_for("discrete"):  # ob2i, rnd and krnd included
+        assert name in str(err.value)
+    with pytest.raises(EnvError) as err:
+        check_spaces("ob2i", OBS, BOX_ACTIONS)
+    for name in algorithms.names_for("continuous"):
+        assert name in str(err.value)
+
+
+def test_preset_then_algorithm_then_flags() -> None:
+    # the algorithm's defining values survive any generic preset; a flag still wins
+    for preset in ("atari", "cartpole", "control", "maze"):
+        assert make_config("ob2i", "CartPole-v1", preset=preset).eps_end == 0.1
+        assert make_config("naf", "Pendulum-v1", preset=preset).loss == "mse"
+    assert make_config("ddqn", "CartPole-v1", preset="cartpole").eps_end == 0.02
+    assert make_config("ob2i", "CartPole-v1", preset="cartpole", eps_end=0.05).eps_end == 0.05
+    # a preset made for one algorithm is its variant: applied over its values, refused elsewhere
+    assert make_config("bdqn", "CartPole-v1").blr.redraw == "every"
+    assert make_config("bdqn", "CartPole-v1", preset="bdqn").blr.redraw == "step"
+    with pytest.raises(ConfigError, match="preset 'bdqn' is made for --algo bdqn"):
+        make_config("farsighter", "CartPole-v1", preset="bdqn")
+
+
+def test_adaptive_k_support_comes_from_the_table() -> None:
+    from farsighter.config import validate
+
+    for spec in algorithms.TABLE:
+        env = "Pendulum-v1" if spec.actions == "continuous" else "CartPole-v1"
+        k = 1 if spec.episodic else 2
+        cfg = make_config(
+            spec.name, env, **{"adaptive_k.enabled": True, "k": k, "adaptive_k.k_min": 1}
+        )
+        if spec.adaptive_k:
+            validate(cfg)
+        else:
+            with pytest.raises(ConfigError, match="only supported by --algo farsighter and"):
+                validate(cfg)
+
+
+def test_presets_command_lists_every_preset_and_algorithm(
+    capsys: pytest.CaptureFixture[str],
+) -> None:
+    assert main(["presets"]) == 0
+    out = capsys.readouterr().out
+    for name in PRESETS:
+        assert f"\n{name}" in f"\n{out}"
+    for spec in algorithms.TABLE:
+        assert f"\n{spec.name} [{spec.actions} actions]" in out

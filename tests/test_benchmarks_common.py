@@ -1,0 +1,66 @@
+"""benchmarks/common.py records the command relative to the repository, not an absolute path."""
+
+from __future__ import annotations
+
+import importlib.util
+from pathlib import Path, PurePath
+from types import ModuleType
+
+import pytest
+
+ROOT = PurePath("/abs/repo")
+
+
+@pytest.fixture(scope="module")
+def common() -> ModuleType:
+    file = Path(__file__).resolve().parent.parent / "benchmarks" / "common.py"
+    spec = importlib.util.spec_from_file_location("benchmarks_common_under_test", file)
+    assert spec is not None and spec.loader is not None
+    module = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(module)
+    return module
+
+
+@pytest.mark.parametrize(
+    ("argv", "module", "expected"),
+    [
+        # python -m benchmarks.atari_sps: argv[0] is the absolute path of the module's file
+        (
+            ["/abs/repo/benchmarks/atari_sps.py", "--steps", "10"],
+            True,
+            "python -m benchmarks.atari_sps --steps 10",
+        ),
+        (["/abs/repo/benchmarks/learning.py"], None, "python -m benchmarks.learning"),
+        (["/abs/repo/pkg/__main__.py"], True, "python -m pkg"),
+        # python benchmarks/x.py (a script, not a module): its path relative to the repository
+        (["/abs/repo/benchmarks/x.py", "--n", "1"], False, "python benchmarks/x.py --n 1"),
+        (["benchmarks/x.py"], False, "python benchmarks/x.py"),
+        # absolute paths inside the repository become relative, also after --flag=; others stay
+        (
+            [
+                "/abs/repo/benchmarks/maze_collapse.py",
+                "/abs/repo/docs/results/maze",
+                "--out=/abs/repo/o",
+            ],
+            True,
+            "python -m benchmarks.maze_collapse docs/results/maze --out=o",
+        ),
+        (
+            ["/abs/repo/benchmarks/x.py", "/tmp/elsewhere", "/abs/repo"],
+            True,
+            "python -m benchmarks.x /tmp/elsewhere .",
+        ),
+        (["/abs/repository/x.py"], True, "python /abs/repository/x.py"),  # a sibling, not inside
+        (["/abs/repo/benchmarks/x.py", "a b"], True, "python -m benchmarks.x 'a b'"),  # quoted
+        (["-c"], None, "python -c"),
+    ],
+)
+def test_relative_command(
+    common: ModuleType, argv: list[str], module: bool | None, expected: str
+) -> None:
+    assert common.relative_command(argv, ROOT, module=module) == expected
+
+
+def test_relative_command_keeps_the_interpreter_name(common: ModuleType) -> None:
+    got = common.relative_command(["/abs/repo/benchmarks/x.py"], ROOT, executable="python3.11")
+    assert got == "python3.11 -m benchmarks.x"

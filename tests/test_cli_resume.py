@@ -1,0 +1,153 @@
+"""``farsighter train --resume`` continues a run with its saved config; how train reads its flags."""
+
+from __future__ import annotations
+
+import json
+import subprocess
+import sys
+from pathlib import Path
+
+import pytest
+
+from farsighter.cli import train_config
+from farsighter.config import make_config, save_config
+from farsighter.errors import ConfigError, RunDirError
+
+FIRST = [
+    "--algo",
+    "ddqn",
+    "--env",
+    "CartPole-v1",
+    "--preset",
+    "cartpole",
+    "--total-steps",
+    "300",
+    "--learning-starts",
+    "100",
+    "--eval-every",
+    "0",
+    "--checkpoint-every",
+    "100",
+    "--buffer-size",
+    "1000",
+    "--batch-size",
+    "16",  # non-default values the resume must keep
+    "--lr",
+    "0.002",
+    "--hidden-sizes",
+    "16",
+    "16",
+    "--torch-threads",
+    "1",
+    "--no-progress",
+]
+
+
+def run_cli(*args: str, cwd: Path) -> subprocess.CompletedProcess[str]:
+    return subprocess.run(
+        [sys.executable, "-m", "farsighter", *args],
+        cwd=cwd,
+        capture_output=True,
+        text=True,
+        timeout=300,
+    )
+
+
+def one_line_error(res: subprocess.CompletedProcess[str], needle: str) -> None:
+    assert res.returncode == 2, res.stderr
+    lines = res.stderr.strip().splitlines()
+    assert len(lines) == 1 and lines[0].startswith("farsighter: error: "), res.stderr
+    assert needle in lines[0], res.stderr
+
+
+def test_resume_alone_continues_with_the_saved_config(tmp_path: Path) -> None:
+    res = run_cli("train", "--run-dir", "run", *FIRST, cwd=tmp_path)
+    assert res.returncode == 0, res.stderr
+    assert json.loads(res.stdout)["global_step"] == 300
+    before = json.loads((tmp_path / "run" / "config.json").read_text())
+    assert before["lr"] == 0.002 and before["batch_size"] == 16 and before["total_steps"] == 300
+
+    res = run_cli("train", "--run-dir", "run", "--resume", "--total-steps", "600", cwd=tmp_path)
+    assert res.returncode == 0, res.stderr
+    assert json.loads(res.stdout)["global_step"] == 600
+    after = json.loads((tmp_path / "run" / "config.json").read_text())
+    assert after == {**before, "total_steps": 600}  # the new budget is recorded, nothing else
+
+    # a flag that changes a field a resume may not change is refused, naming it
+    res = run_cli("train", "--run-dir", "run", "--resume", "--lr", "0.1", cwd=tmp_path)
+    one_line_error(res, "lr (saved 0.002, given 0.1)")
+    res = run_cli("train", "--run-dir", "run", "--resume", "--preset", "control", cwd=tmp_path)
+    one_line_error(res, "preset (saved 'cartpole', given 'control')")
+    # repeating the original flags still works (the old way)
+    res = run_cli(
+        "train", "--run-dir", "run", *FIRST, "--total-steps", "700", "--resume", cwd=tmp_path
+    )
+    assert res.returncode == 0, res.stderr
+    assert json.loads(res.stdout)["global_step"] == 700
+    assert json.loads((tmp_path / "run" / "config.json").read_text())["total_steps"] == 700
+
+    res = run_cli("train", "--run-dir", "nowhere", "--resume", cwd=tmp_path)
+    one_line_error(res, "cannot resume: nowhere holds no run (no config.json)")
+    assert not (tmp_path / "nowhere").exists()
+
+
+def test_resume_finds_the_default_run_dir(tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> None:
+    monkeypatch.chdir(tmp_path)
+    run = tmp_path / "runs" / "CartPole-v1__farsighter__s2"
+    run.mkdir(parents=True)
+    saved = make_config("farsighter", "CartPole-v1", "cartpole", seed=2, lr=0.001, k=7)
+    save_config(saved, run / "config.json")
+    cfg = train_config(["--resume", "--algo", "farsighter", "--seed", "2", "--total-steps", "9"])
+    assert cfg.resume and cfg.total_steps == 9
+    assert cfg.lr == 0.001 and cfg.k == 7 and cfg.preset == "cartpole" and cfg.seed == 2
+    assert cfg.resolved_run_dir == Path("runs/CartPole-v1__farsighter__s2")
+    # given again, the preset is compared by its resolved name
+    assert (
+        train_config(["--resume", "--algo=farsighter", "--seed=2", "--preset", "cartpole"]).preset
+        == "cartpole"
+    )
+    with pytest.raises(RunDirError, match=r"runs/CartPole-v1__farsighter__s3 holds no run"):
+        train_config(["--resume", "--algo", "farsighter", "--seed", "3"])
+    with pytest.raises(RunDirError, match=r"runs/CartPole-v1__ddqn__s1 holds no run"):
+        train_config(["--resume"])
+
+
+def test_algo_env_preset_choose_the_defaults() -> None:
+    cfg = train_config(
+        ["--algo=farsighter", "--env", "CartPole-v1", "--preset=cartpole", "--k", "3"]
+    )
+    assert cfg == make_config("farsighter", "CartPole-v1", "cartpole", k=3)
+    assert train_config(["--algo", "farsighter", "--preset=cartpole", "--k=3"]) == cfg
+    # auto is stored resolved, given or not
+    assert train_config(["--preset", "auto"]).preset == "control"
+    assert train_config([]).preset == "control"
+    assert train_config(["--algo", "naf", "--env", "Pendulum-v1"]).preset == "continuous"
+    # flags the first pass leaves alone: nested fields, negative numbers, lists, bool flags
+    cfg = train_config(
+        ["--blr.prior-std", "0.5", "--lr", "-1", "--hidden-sizes", "8", "8", "--no-progress"]
+    )
+    assert cfg.blr.prior_std == 0.5 and cfg.lr == -1 and cfg.hidden_sizes == (8, 8)
+    assert not cfg.progress and cfg.algo == "ddqn"
+    with pytest.raises(ConfigError, match="unknown algorithm 'nope'"):
+        train_config(["--algo", "nope"])
+
+
+def test_train_help_lists_every_field(capsys: pytest.CaptureFixture[str]) -> None:
+    with pytest.raises(SystemExit) as exc:
+        train_config(["--algo", "bdqn", "--help"])
+    assert exc.value.code == 0
+    out = capsys.readouterr().out
+    for flag in ("--algo", "--resume", "--total-steps", "--blr.prior-std", "--adaptive-k.k-max"):
+        assert flag in out
+    assert "farsighter train" in out
+
+
+@pytest.mark.parametrize("args", [["--seed", "abc"], ["--no-such-flag"], ["--algo"], ["stray"]])
+def test_parse_errors_exit_2_without_traceback(args: list[str]) -> None:
+    res = subprocess.run(
+        [sys.executable, "-m", "farsighter", "train", *args],
+        capture_output=True,
+        text=True,
+        timeout=300,
+    )
+    assert res.returncode == 2 and "Traceback" not in res.stderr, res.stderr
