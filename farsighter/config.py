@@ -596,9 +596,17 @@ def make_config(
 
 
 def validate(cfg: Config) -> None:
-    """Raise :class:`ConfigError` with one line naming the problem and what is accepted."""
+    """Raise :class:`ConfigError` with one line naming the first problem and what is accepted."""
     spec = algorithms.get(cfg.algo)
-    checks: list[tuple[bool, str]] = [
+    for part in (_run_checks, _ob2i_rnd_checks, _algorithm_checks, _naf_checks):
+        for ok, message in part(cfg, spec):
+            if not ok:
+                raise ConfigError(message)
+
+
+def _run_checks(cfg: Config, spec: algorithms.Algorithm) -> list[tuple[bool, str]]:
+    """The run, learning and BLR fields."""
+    return [
         (cfg.k >= 1, f"k must be an integer >= 1 (got {cfg.k})"),
         (cfg.lr > 0, f"lr must be > 0 (got {cfg.lr})"),
         (cfg.buffer_size > 0, f"buffer_size must be > 0 (got {cfg.buffer_size})"),
@@ -653,11 +661,12 @@ def validate(cfg: Config) -> None:
         (cfg.checkpoint_every >= 0, "checkpoint_every must be >= 0"),
         (cfg.torch_threads >= 0, "torch_threads must be >= 0"),
     ]
-    for ok, message in checks:
-        if not ok:
-            raise ConfigError(message)
+
+
+def _ob2i_rnd_checks(cfg: Config, spec: algorithms.Algorithm) -> list[tuple[bool, str]]:
+    """OB2I and RND fields."""
     ob, rn = cfg.ob2i, cfg.rnd
-    ob2i_rnd_checks: list[tuple[bool, str]] = [
+    return [
         (ob.num_heads >= 2, f"ob2i.num_heads must be >= 2 (got {ob.num_heads})"),
         (0.0 <= ob.beta <= 1.0, f"ob2i.beta must be in [0, 1] (got {ob.beta})"),
         (ob.bonus_reward_weight >= 0, "ob2i.bonus_reward_weight must be >= 0"),
@@ -676,16 +685,25 @@ def validate(cfg: Config) -> None:
             "stride and sample_recent off",
         ),
     ]
-    for ok, message in ob2i_rnd_checks:
-        if not ok:
-            raise ConfigError(message)
-    if cfg.adaptive_k.enabled and not spec.adaptive_k:
-        raise ConfigError(
-            "adaptive_k.enabled is only supported by --algo "
-            + " and ".join(a.name for a in algorithms.TABLE if a.adaptive_k)
-        )
+
+
+def _algorithm_checks(cfg: Config, spec: algorithms.Algorithm) -> list[tuple[bool, str]]:
+    """What the algorithm table allows, and the device."""
+    adaptive = " and ".join(a.name for a in algorithms.TABLE if a.adaptive_k)
+    device_ok = cfg.device in ("auto", "cpu", "cuda") or cfg.device.startswith("cuda:")
+    return [
+        (
+            not cfg.adaptive_k.enabled or spec.adaptive_k,
+            f"adaptive_k.enabled is only supported by --algo {adaptive}",
+        ),
+        (device_ok, f"unknown device '{cfg.device}'; accepted: auto, cpu, cuda, cuda:N"),
+    ]
+
+
+def _naf_checks(cfg: Config, spec: algorithms.Algorithm) -> list[tuple[bool, str]]:
+    """The continuous agents' fields."""
     n = cfg.naf
-    naf_checks: list[tuple[bool, str]] = [
+    return [
         (0.0 < n.tau <= 1.0, f"naf.tau must be in (0, 1] (got {n.tau})"),
         (n.updates_per_step >= 1, "naf.updates_per_step must be >= 1"),
         (n.noise_std >= 0, f"naf.noise_std must be >= 0 (got {n.noise_std})"),
@@ -714,11 +732,6 @@ def validate(cfg: Config) -> None:
             f"naf.elbo_batch ({n.elbo_batch}) must not exceed buffer_size ({cfg.buffer_size})",
         ),
     ]
-    for ok, message in naf_checks:
-        if not ok:
-            raise ConfigError(message)
-    if cfg.device not in ("auto", "cpu", "cuda") and not cfg.device.startswith("cuda:"):
-        raise ConfigError(f"unknown device '{cfg.device}'; accepted: auto, cpu, cuda, cuda:N")
 
 
 # --------------------------------------------------------------------------------------------
