@@ -12,6 +12,7 @@ import pytest
 from farsighter.cli import train_config
 from farsighter.config import make_config, save_config
 from farsighter.errors import ConfigError, RunDirError
+from tests.test_cli import run_cli
 
 FIRST = [
     "--algo",
@@ -41,16 +42,6 @@ FIRST = [
     "1",
     "--no-progress",
 ]
-
-
-def run_cli(*args: str, cwd: Path) -> subprocess.CompletedProcess[str]:
-    return subprocess.run(
-        [sys.executable, "-m", "farsighter", *args],
-        cwd=cwd,
-        capture_output=True,
-        text=True,
-        timeout=300,
-    )
 
 
 def one_line_error(res: subprocess.CompletedProcess[str], needle: str) -> None:
