@@ -60,11 +60,6 @@ def prepare_run_dir(cfg: Config) -> Path:
     be created or written raises :class:`RunDirError`, one line with the reason."""
     path = cfg.resolved_run_dir
 
-    def write_config(new: Config) -> None:  # atomic: a crash mid-write keeps the previous one
-        tmp = path / (CONFIG_FILE + ".tmp")
-        save_config(new, tmp)
-        os.replace(tmp, path / CONFIG_FILE)
-
     if cfg.resume and cfg.overwrite:
         raise RunDirError("--resume and --overwrite exclude each other; pass one")
     if cfg.resume:
@@ -87,7 +82,7 @@ def prepare_run_dir(cfg: Config) -> Path:
         updated = dataclasses.replace(saved, **{name: getattr(cfg, name) for name in recorded})
         if updated != saved:
             try:
-                write_config(updated)
+                save_config(updated, path / CONFIG_FILE)
             except OSError as exc:
                 raise RunDirError(
                     f"cannot write {path / CONFIG_FILE}: {exc.strerror or exc}"
@@ -104,7 +99,7 @@ def prepare_run_dir(cfg: Config) -> Path:
                 )
             shutil.rmtree(path)
         path.mkdir(parents=True, exist_ok=True)
-        write_config(cfg)
+        save_config(cfg, path / CONFIG_FILE)
     except OSError as exc:
         raise RunDirError(f"cannot create run directory {path}: {exc.strerror or exc}") from None
     return path

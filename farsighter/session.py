@@ -57,7 +57,7 @@ class LoopState:
         return state
 
 
-def crossed(before: int, after: int, every: int) -> bool:
+def passed_multiple(before: int, after: int, every: int) -> bool:
     """True when a multiple of ``every`` lies in (before, after]; never when ``every`` is 0."""
     return bool(every) and before // every < after // every
 

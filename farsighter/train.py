@@ -20,9 +20,9 @@ from farsighter.session import (
     EvalResult,
     LoopState,
     RunLog,
-    crossed,
     evaluate_episodes,
     final_observations,
+    passed_multiple,
     restore_run,
     save_run,
 )
@@ -81,9 +81,9 @@ def train(cfg: Config, callbacks: Sequence[Callback] = ()) -> dict[str, Any]:
             for callback in callbacks:
                 callback.on_step(state.global_step, info, agent)
             log.step(state, info, metrics, agent)
-            if crossed(prev_step, state.global_step, cfg.eval_every):
+            if passed_multiple(prev_step, state.global_step, cfg.eval_every):
                 log.evaluate(state, agent)
-            if crossed(prev_step, state.global_step, cfg.checkpoint_every) and (
+            if passed_multiple(prev_step, state.global_step, cfg.checkpoint_every) and (
                 state.global_step < cfg.total_steps
             ):
                 save_run(path, cfg, state, agent, envs, obs)
