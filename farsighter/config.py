@@ -4,7 +4,7 @@ A run is a pure function of its :class:`Config` and seed. Configs are frozen dat
 docstring per field (tyro turns those into ``--help`` text). Presets are named sets of field
 values whose numbers cite their source; ``make_config`` layers them as
 
-    field defaults  <-  preset  <-  algorithm  <-  explicit overrides
+    field defaults  <-  preset  <-  algorithm  <-  preset for that algorithm  <-  explicit overrides
 
 where "algorithm" is the values that define it (:mod:`farsighter.algorithms`), so a preset's
 generic schedule never replaces them. A preset made for one algorithm (``Preset.algo``, e.g.
@@ -44,13 +44,23 @@ class BLRConfig:
     """batch: recompute Phi Phi^T from D tuples each refresh; incremental: running statistics."""
     forgetting: float = 1.0
     """Incremental mode: statistics are multiplied by this before each accumulation (1 = none)."""
-    redraw: Literal["step", "every", "episode"] = "step"
-    """When a fresh Thompson draw z is made: every step, every `redraw_every` steps, or per episode."""
+    scale: Literal["fixed", "residual"] = "fixed"
+    """fixed: sigma and sigma_eps are the constants above (the paper). residual: at every refresh
+    sigma_eps = max(noise_std, RMS residual of the regression targets under the posterior mean)
+    and sigma = sigma_eps * prior_std / noise_std, so the posterior follows the scale of the
+    values (noise_std is then a floor and prior_std / noise_std the prior's ratio to it)."""
+    redraw: Literal["step", "k", "every", "episode"] = "step"
+    """When a fresh Thompson draw z is made, per environment: every step (Algorithm 2), held for k
+    steps (the horizon of the k-step target), every `redraw_every` steps, or once per episode."""
     redraw_every: int = 1
     """T for ``redraw=every``."""
-    target: Literal["mean", "thompson"] = "mean"
-    """Argmax of the Q-loss target under the posterior mean (Eq. 8), or under the latest acting
-    Thompson draw, one weight set for the whole minibatch (the BDQN authors' code)."""
+    target: Literal["mean", "thompson", "sample"] = "mean"
+    """Value of the next state in the Q-loss target. mean: argmax and value under the posterior
+    mean (Eq. 8). thompson: argmax under the latest acting Thompson draw, one weight set for the
+    whole minibatch (the BDQN authors' code). sample: a fresh posterior draw per target row is
+    added to both the online and the target Q of s' (argmax and value), so uncertainty about
+    the next state raises the target: optimism propagates back along the chain of bootstraps,
+    as in randomised value functions (Osband et al. 2019); our extension, not the paper's."""
     posterior_sampling: Literal["recent", "uniform"] = "recent"
     """Batch-mode refresh tuples: the latest D transitions (Table 1's 'most recent'), or D starts
     drawn uniformly from the whole buffer with replacement (the BDQN authors' code)."""
@@ -236,7 +246,7 @@ class Config:
     """Run directory; empty means runs/<env>__<algo>__s<seed>."""
     preset: str = "auto"
     """Preset the defaults came from (auto: atari for Atari ids, continuous for the NAF agents,
-    control otherwise)."""
+    general otherwise)."""
     device: str = "auto"
     """auto (CUDA when present, else CPU), cpu, cuda or cuda:N."""
     resume: bool = False
@@ -261,6 +271,14 @@ class Config:
     """Discount factor. Table 1: 0.99."""
     k: int = 1
     """Steps per return: 1 is one-step TD; k > 1 uses k-step returns with gamma^k bootstraps."""
+    k_target: Literal["k", "max"] = "k"
+    """k: the k-step target (section 4.4). max (bdqn, farsighter): the larger of the k-step and
+    the one-step target of each sampled start. A k-step return follows the behaviour for k steps,
+    so an exploratory episode that ended early makes it pessimistic and stops optimism from
+    propagating; in a deterministic task every realised return is a lower bound on Q*, and the
+    max keeps the one-step optimality target while the k-step return still carries found reward
+    k steps back at once (lower-bound Q-learning, Tang 2020). Biased upwards where rewards or
+    transitions are noisy; one more forward pass per update. Our extension, not the paper's."""
     stride: bool = False
     """Algorithm 1 literally: one k-step tuple per k steps instead of one starting at every step."""
     batch_size: int = 32
@@ -352,7 +370,47 @@ class Preset:
     values: dict[str, Any]
     algo: str = ""
     """Made for this algorithm only (its variant): refused with others, applied over its values."""
+    per_algo: dict[str, dict[str, Any]] = field(default_factory=dict)
+    """Values for one algorithm that apply over that algorithm's own (defining) values."""
 
+
+# Table 1, robotic/low-dimensional column (the control preset; general starts from it).
+_CONTROL: dict[str, Any] = {
+    "optimizer": "rmsprop",
+    "lr": 0.0025,
+    "rmsprop_alpha": 0.95,
+    "gamma": 0.99,
+    "train_every": 4,
+    "batch_size": 32,
+    "buffer_size": 1_000_000,
+    "target_update_every": 1_000,  # N = 1k (robotic controls)
+    "blr.posterior_every": 10_000,  # M = 10 N
+    "blr.posterior_samples": 1_000,  # D = 1k tuples
+    "blr.prior_std": 0.1,
+    "blr.noise_std": 1.0,
+}
+
+# The posterior of the general preset (and of the cartpole preset): fresh, scaled, propagating.
+_FRESH_POSTERIOR: dict[str, Any] = {
+    # Incremental statistics make a refresh O(|A| d^3): refresh every 100 steps instead of
+    # Table 1's M = 10 N = 10k, which on a task of a few thousand episodes leaves the posterior
+    # stale for most of the run.
+    "blr.mode": "incremental",
+    "blr.posterior_every": 100,
+    # sigma_eps follows the residuals (never below 1, a reward of order 1); the prior sigma
+    # equals it.
+    "blr.scale": "residual",
+    "blr.prior_std": 1.0,
+    "blr.noise_std": 1.0,
+    # Uncertainty about the next state raises the target, so optimism propagates.
+    "blr.target": "sample",
+}
+# Over the algorithms' own values: one draw held per episode (docs/results/explore compares the
+# redraw modes), and Farsighter's k-step target no lower than the one-step target.
+_FRESH_PER_ALGO: dict[str, dict[str, Any]] = {
+    "bdqn": {"blr.redraw": "episode"},
+    "farsighter": {"blr.redraw": "episode", "k_target": "max"},
+}
 
 PRESETS: dict[str, Preset] = {
     p.name: p
@@ -361,20 +419,22 @@ PRESETS: dict[str, Preset] = {
             "control",
             "Table 1, robotic/low-dimensional column.",
             "Farsighter paper, appendix 9.2 Table 1",
+            dict(_CONTROL),
+        ),
+        Preset(
+            "general",
+            "What `auto` gives a discrete task that is not Atari: Table 1's control column for "
+            "the learning, with a posterior that stays fresh and scaled and whose uncertainty "
+            "propagates, so that Thompson exploration works on tasks nobody tuned it for "
+            "(docs/results/explore). Reproduce the paper with --preset control or atari.",
+            "Farsighter paper Table 1 (control column) for the shared values; the posterior "
+            "settings are ours, chosen on the exploration suite (farsighter explore) and "
+            "checked on CartPole, the maze and Pendulum",
             {
-                "optimizer": "rmsprop",
-                "lr": 0.0025,
-                "rmsprop_alpha": 0.95,
-                "gamma": 0.99,
-                "train_every": 4,
-                "batch_size": 32,
-                "buffer_size": 1_000_000,
-                "target_update_every": 1_000,  # N = 1k (robotic controls)
-                "blr.posterior_every": 10_000,  # M = 10 N
-                "blr.posterior_samples": 1_000,  # D = 1k tuples
-                "blr.prior_std": 0.1,
-                "blr.noise_std": 1.0,
+                **_CONTROL,
+                **_FRESH_POSTERIOR,
             },
+            per_algo=_FRESH_PER_ALGO,
         ),
         Preset(
             "atari",
@@ -434,9 +494,11 @@ PRESETS: dict[str, Preset] = {
             "cartpole",
             "Control preset with a faster optimiser and shorter schedules for CartPole-sized "
             "tasks (our tuning; used by the learning checks and the README quick start).",
-            "Farsighter tuning on CartPole-v1 (benchmarks/learning.py); Adam as in CleanRL's "
+            "Farsighter tuning on CartPole-v1 (benchmarks/learning.py), with the general preset's "
+            "posterior (checked by tests/test_learning_slow.py); Adam as in CleanRL's "
             "dqn.py classic-control defaults",
-            {
+            per_algo=_FRESH_PER_ALGO,
+            values={
                 "optimizer": "adam",
                 "lr": 0.0005,
                 "optim_eps": 1e-8,
@@ -449,10 +511,7 @@ PRESETS: dict[str, Preset] = {
                 "eps_end": 0.02,
                 "eps_decay_steps": 15_000,
                 "hidden_sizes": (128, 128),
-                "blr.posterior_every": 2_000,
-                "blr.posterior_samples": 10_000,
-                "blr.prior_std": 1.0,
-                "blr.noise_std": 1.0,
+                **_FRESH_POSTERIOR,
                 # CartPole's reward is dense (+1 a step): the novelty bonus is a nuisance there,
                 # and at 0.5 RND reached 475 in 2 of 3 seeds only (our runs).
                 "rnd.intrinsic_weight": 0.1,
@@ -558,12 +617,12 @@ def is_atari_id(env_id: str) -> bool:
 
 
 def resolve_preset_name(preset: str, env: str, algo: str = "") -> str:
-    """auto: atari for ALE ids, continuous for the NAF agents, control otherwise."""
+    """auto: atari for ALE ids, continuous for the NAF agents, general otherwise."""
     if preset == "auto":
         if is_atari_id(env):
             return "atari"
         continuous = algo and algorithms.get(algo).actions == "continuous"
-        return "continuous" if continuous else "control"
+        return "continuous" if continuous else "general"
     if preset not in PRESETS:
         raise ConfigError(f"unknown preset '{preset}'; accepted: auto, {', '.join(PRESETS)}")
     return preset
@@ -573,7 +632,7 @@ def make_config(
     algo: str = "ddqn", env: str = "CartPole-v1", preset: str = "auto", **overrides: Any
 ) -> Config:
     """Build a config: field defaults <- preset <- the algorithm's values (a preset made for the
-    algorithm comes after them) <- ``overrides``.
+    algorithm comes after them) <- the preset's values for this algorithm <- ``overrides``.
 
     ``overrides`` use field names; nested fields are written ``blr__prior_std`` or passed in a
     dict as ``{"blr.prior_std": ...}`` via ``**{"blr.prior_std": 0.1}``.
@@ -588,6 +647,7 @@ def make_config(
             + ", ".join(p.name for p in PRESETS.values() if p.algo in ("", algo))
         )
     layers = [spec.defaults, chosen.values] if chosen.algo else [chosen.values, spec.defaults]
+    layers.append(chosen.per_algo.get(algo, {}))
     values: dict[str, Any] = {}
     for layer in layers:
         values.update(layer)
@@ -698,6 +758,11 @@ def _algorithm_checks(cfg: Config, spec: algorithms.Algorithm) -> list[tuple[boo
             f"adaptive_k.enabled is only supported by --algo {adaptive}",
         ),
         (device_ok, f"unknown device '{cfg.device}'; accepted: auto, cpu, cuda, cuda:N"),
+        (
+            cfg.k_target == "k" or spec.agent == "farsighter",
+            "k_target max is only supported by --algo "
+            + " and ".join(a.name for a in algorithms.TABLE if a.agent == "farsighter"),
+        ),
     ]
 
 

@@ -3,12 +3,16 @@
 Q(s, a) = phi_theta(s)^T w_a with a Bayesian linear regression posterior over each w_a (Eq. 9).
 
 * Acting (Algorithm 2): a Thompson draw w_a = mean_a + chol(Cov_a) z (Eq. 7), one independent z
-  per action and per environment; Farsighter draws afresh at every step, BDQN every T steps
-  (``blr.redraw``). Before ``learning_starts`` actions are uniform, as for the epsilon agents.
+  per action and per environment; Farsighter draws afresh at every step, BDQN every T steps;
+  ``blr.redraw`` also holds a draw for k steps or for a whole episode. Before
+  ``learning_starts`` actions are uniform, as for the epsilon agents.
 * Learning theta (Eq. 8): the double-Q loss with w fixed at the posterior mean, on k-step
   returns with gamma^k bootstraps (section 4.4), from the latest N transitions (Algorithm 1
-  line 4) when ``sample_recent``. Target network and target mean are copied every N steps,
-  after the posterior refresh when both fall on one step (Algorithm 1 lines 6 then 8).
+  line 4) when ``sample_recent``. With ``blr.target = sample`` a posterior draw per row is added
+  to the next state's Q in the target (optimism that propagates), and with ``k_target = max``
+  the target is never below the one-step target (both our extensions). Target network and
+  target mean are copied every N steps, after the posterior refresh when both fall on one step
+  (Algorithm 1 lines 6 then 8).
 * Posterior (Algorithm 1 line 6): every M steps, from up to D recent tuples with features of the
   current theta and targets y from the target network exactly as in Eq. 8 (batch mode), or from
   running sufficient statistics (incremental mode, the online update the paper's appendix 10
@@ -63,7 +67,7 @@ FEATURE_CHUNK = 4_096  # rows per forward pass when computing features for a pos
 class FarsighterCounters(Counters):
     refreshes: int = 0  # posterior refreshes made (every M steps)
     draws: int = 0  # Thompson draws made (one per environment and acting step with redraw=step)
-    steps_since_draw: int = 0  # acting steps since the held draw (redraw = every)
+    steps_since_draw: int = 0  # acting steps since the held draw (redraw = every, k)
     q_variance: float = float("nan")  # at the latest refresh (adaptive k's signal)
 
 
@@ -100,6 +104,7 @@ class FarsighterAgent:
             noise_std=b.noise_std,
             cov_scale=b.cov_scale,
             forgetting=b.forgetting,
+            scale=b.scale,
             device=device,
         )
         self.head.set_mean(init_AD.to(device))
@@ -113,7 +118,7 @@ class FarsighterAgent:
         self.counters = FarsighterCounters(k=cfg.k)
         # Incremental mode: recent minibatch features, for the Q-variance of adaptive k.
         self.recent_phi: torch.Tensor | None = None
-        # Per-environment weight draws for redraw = every / episode.
+        # Per-environment weight draws for redraw = k / every / episode.
         self.w_EAD: torch.Tensor | None = None
         self.redraw_E = np.ones(cfg.num_envs, dtype=bool)
 
@@ -141,8 +146,9 @@ class FarsighterAgent:
         # draw is also made explicit here.
         if blr.redraw == "step":
             self.redraw_E[:] = True
-        elif blr.redraw == "every":
-            if self.w_EAD is None or c.steps_since_draw >= blr.redraw_every:
+        elif blr.redraw in ("every", "k"):
+            hold = blr.redraw_every if blr.redraw == "every" else c.k
+            if self.w_EAD is None or c.steps_since_draw >= hold:
                 self.redraw_E[:] = True
                 c.steps_since_draw = 0
             c.steps_since_draw += 1
@@ -214,7 +220,12 @@ class FarsighterAgent:
         thompson = self.cfg.blr.target == "thompson"
         w_online_AD = self._acting_draw() if thompson else self.head.mean_AD
         q_next_online = phi_next @ w_online_AD.T
-        q_next_target = self.torso_target(t.next_obs_B) @ self.target_mean_AD.T
+        phi_next_target = self.torso_target(t.next_obs_B)
+        q_next_target = phi_next_target @ self.target_mean_AD.T
+        if self.cfg.blr.target == "sample":
+            noise_BA = self.head.q_noise(phi_next_target, generator=self.gen)
+            q_next_online = q_next_online + noise_BA
+            q_next_target = q_next_target + noise_BA
         return double_q_target(t.returns_B, t.bootstrap_B, q_next_online, q_next_target)
 
     @torch.no_grad()
@@ -233,6 +244,11 @@ class FarsighterAgent:
             return None
         t = batch_tensors(batch, self.device)
         y_B = self._targets(t)
+        if self.cfg.k_target == "max" and self.counters.k > 1:
+            # The larger of the k-step and the one-step target of the same start (lower-bound
+            # Q-learning, Tang 2020): see Config.k_target.
+            one = self.replay.gather(batch.env_index, batch.index, 1, self.cfg.gamma)
+            y_B = torch.maximum(y_B, self._targets(batch_tensors(one, self.device)))
         phi_BD = self.torso(t.obs_B)
         q_B = (phi_BD @ self.head.mean_AD.T).gather(1, t.actions_B[:, None])[:, 0]
         loss = td_loss(q_B, y_B, self.cfg.loss)
@@ -305,6 +321,7 @@ class FarsighterAgent:
             "q_variance": self.counters.q_variance,
             "posterior_refreshes": float(self.head.num_refreshes),
             "jitter_events": float(self.head.jitter_events),
+            "noise_std": self.head.noise_std,
         }
 
     # ------------------------------------------------------------------ checkpoints

@@ -36,9 +36,31 @@ def _first_line(exc: BaseException) -> str:
     return text[0] if text else type(exc).__name__
 
 
-def _register_builtin() -> None:
-    # Importing registers ``farsighter/BridgeMaze-v0`` and friends (idempotent).
+MINIGRID_PREFIXES = ("MiniGrid-", "BabyAI-")
+MINIGRID_EXTRA = "install the exploration extra: pip install 'farsighter[explore]'"
+
+
+def _register_builtin(env_id: str) -> None:
+    # Importing registers ``farsighter/BridgeMaze-v0`` and friends (idempotent); a chain id
+    # ``farsighter/Chain<L>-v0`` is registered when first named.
     importlib.import_module("farsighter.envs.maze")
+    from farsighter.envs.chain import register_chain
+
+    register_chain(env_id)
+
+
+def is_minigrid_id(env_id: str) -> bool:
+    """MiniGrid and BabyAI ids (the ``minigrid`` package registers them on import)."""
+    return env_id.split(":")[-1].startswith(MINIGRID_PREFIXES)
+
+
+def _register_minigrid(env_id: str) -> None:
+    if ":" in env_id or not is_minigrid_id(env_id) or env_id in gym.registry:
+        return
+    try:
+        import minigrid  # noqa: F401  (importing registers its ids)
+    except ImportError:
+        raise EnvError(f"'{env_id}' is a MiniGrid task; {MINIGRID_EXTRA}") from None
 
 
 def _register_robotics(env_id: str) -> None:
@@ -56,8 +78,9 @@ def _register_robotics(env_id: str) -> None:
 
 
 def _make_base(env_id: str, cfg: Config, render_mode: str | None) -> gym.Env:
-    _register_builtin()
+    _register_builtin(env_id)
     _register_robotics(env_id)
+    _register_minigrid(env_id)
     kwargs: dict[str, Any] = {}
     if render_mode is not None:
         kwargs["render_mode"] = render_mode
@@ -97,6 +120,8 @@ def make_env(
     if is_atari_id(cfg.env):
         env = _wrap_atari(env, cfg, training)
     else:
+        if is_minigrid_id(cfg.env):
+            env = MiniGridImage(env)
         if is_goal_space(env.observation_space):
             env = FlattenGoalObservation(env, include_achieved=cfg.naf.her)
         env = gym.wrappers.RecordEpisodeStatistics(env)
@@ -132,6 +157,27 @@ def make_vector_env(cfg: Config, *, seed: int) -> gym.vector.SyncVectorEnv:
         [partial(make_env, cfg, seed=seed + i, training=True) for i in range(cfg.num_envs)],
         autoreset_mode=gym.vector.AutoresetMode.SAME_STEP,
     )
+
+
+class MiniGridImage(gym.ObservationWrapper):
+    """A MiniGrid observation as its egocentric view only, flattened to float32 in [0, 1]: the
+    (7, 7, 3) grid of object, colour and state indices, each divided by its largest value. The
+    agent's direction is implicit in the view and the mission text is dropped (fixed per task
+    in DoorKey, KeyCorridor and MultiRoom)."""
+
+    # The largest object, colour and state indices of minigrid.core.constants.
+    MAX_INDEX = np.array([10.0, 5.0, 2.0], dtype=np.float32)
+
+    def __init__(self, env: gym.Env) -> None:
+        super().__init__(env)
+        image = env.observation_space["image"]  # type: ignore[index]
+        self.observation_space = gym.spaces.Box(
+            0.0, 1.0, (int(np.prod(image.shape)),), dtype=np.float32
+        )
+
+    def observation(self, observation: dict[str, Any]) -> np.ndarray:
+        image = np.asarray(observation["image"], dtype=np.float32) / self.MAX_INDEX
+        return image.ravel()
 
 
 def is_goal_space(space: gym.Space) -> bool:

@@ -14,6 +14,12 @@ kept, so the head works in batch mode (``fit``: reset, accumulate, refresh, as i
 an incremental mode (``accumulate`` + ``refresh``, optionally with exponential forgetting) whose
 refresh costs O(|A| d^3) and never rescans the replay buffer (SPEC 2.1).
 
+With ``scale="residual"`` the noise sigma_eps follows the data instead of a constant: at each
+refresh it is the root mean squared residual of the regression under the posterior mean (kept
+from a third statistic, sum y^2), never below the configured ``noise_std``, and the prior sigma
+keeps the configured ratio prior_std / noise_std to it. The values of a task with returns of
+order 100 then get posterior spreads of that order without anyone setting sigma by hand.
+
 Tensor names carry shape suffixes: N samples, B rows (states / environments), A actions, D features.
 """
 
@@ -25,12 +31,16 @@ from typing import Any
 import torch
 
 __all__ = [
+    "SCALES",
     "BLRHead",
     "blr_posterior",
     "blr_posterior_factor",
     "cholesky_jitter",
     "greedy_predictive_variance",
+    "residual_variance",
 ]
+
+SCALES = ("fixed", "residual")
 
 # Largest number of float elements a (rows, A, D) temporary may hold in q_sample / predictive_var;
 # bigger batches are processed in row blocks so memory stays bounded (16 MiB of float32).
@@ -188,6 +198,9 @@ class BLRHead:
             the covariance scale). 1 gives the literal Eq. 9 posterior.
         forgetting: in (0, 1]; every ``accumulate`` first multiplies the existing statistics by it
             (exponential forgetting of old features / targets). 1 = no forgetting.
+        scale: ``fixed`` keeps prior_std and noise_std; ``residual`` re-estimates sigma_eps at
+            every refresh as max(noise_std, RMS residual) and sets the prior sigma to
+            sigma_eps * prior_std / noise_std (see the module docstring).
         device: where statistics and caches live.
         stats_dtype: dtype of the sufficient statistics and of the exact posterior.
     """
@@ -201,6 +214,7 @@ class BLRHead:
         noise_std: float = 1.0,
         cov_scale: float = 1.0,
         forgetting: float = 1.0,
+        scale: str = "fixed",
         device: str | torch.device = "cpu",
         stats_dtype: torch.dtype = torch.float64,
     ) -> None:
@@ -215,6 +229,12 @@ class BLRHead:
             raise ValueError(f"forgetting must be in (0, 1], got {forgetting}")
         if not stats_dtype.is_floating_point:
             raise ValueError(f"stats_dtype must be a floating dtype, got {stats_dtype}")
+        if scale not in SCALES:
+            raise ValueError(f"scale must be one of {', '.join(SCALES)}, got {scale!r}")
+        self.scale = scale
+        # The configured values: constants (fixed) or the floor and the prior ratio (residual).
+        self.noise_floor = float(noise_std)
+        self.prior_ratio = float(prior_std) / float(noise_std)
         self.num_actions = int(num_actions)
         self.dim = int(dim)
         self.prior_std = float(prior_std)
@@ -235,6 +255,7 @@ class BLRHead:
         self.count_A = torch.zeros(
             a, dtype=stats_dtype, device=self.device
         )  # (forgetting-weighted)
+        self.yy_A = torch.zeros(a, dtype=stats_dtype, device=self.device)  # sum y^2
         # Exact posterior (stats dtype); starts at the prior N(0, prior_std^2 I).
         self._mean_AD = torch.zeros(a, d, dtype=stats_dtype, device=self.device)
         eye_DD = torch.eye(d, dtype=stats_dtype, device=self.device)
@@ -249,6 +270,7 @@ class BLRHead:
         self.phiphiT_ADD.zero_()
         self.phiy_AD.zero_()
         self.count_A.zero_()
+        self.yy_A.zero_()
 
     @torch.no_grad()
     def accumulate(
@@ -278,6 +300,7 @@ class BLRHead:
             self.phiphiT_ADD.mul_(self.forgetting)
             self.phiy_AD.mul_(self.forgetting)
             self.count_A.mul_(self.forgetting)
+            self.yy_A.mul_(self.forgetting)
         if n == 0:
             return
         action_N = action_N.to(device=self.device, dtype=torch.long)
@@ -297,7 +320,9 @@ class BLRHead:
                 idx_C = order_N[lo : min(lo + chunk_size, start + count)]
                 x_CD = phi_ND.index_select(0, idx_C).to(self.stats_dtype)
                 self.phiphiT_ADD[a].addmm_(x_CD.T, x_CD)
-                self.phiy_AD[a].addmv_(x_CD.T, y_N.index_select(0, idx_C))
+                y_C = y_N.index_select(0, idx_C)
+                self.phiy_AD[a].addmv_(x_CD.T, y_C)
+                self.yy_A[a] += y_C.square().sum()
             start += count
 
     @torch.no_grad()
@@ -305,11 +330,20 @@ class BLRHead:
         """Recompute the Eq. 9 posterior of every action from the statistics, O(|A| d^3).
 
         Updates the exact mean / square-root covariance (stats dtype) and the float32 caches used
-        for acting; counts jitter repairs in ``jitter_events`` / ``last_jitter``.
+        for acting; counts jitter repairs in ``jitter_events`` / ``last_jitter``. With
+        ``scale="residual"`` sigma_eps (and the prior sigma with it) is first re-estimated from the
+        residuals under the posterior mean, and the covariance scaled to it.
         """
         mean_AD, sqrt_cov_ADD, jitter_A = blr_posterior_factor(
             self.phiphiT_ADD, self.phiy_AD, self.prior_std, self.noise_std
         )
+        if self.scale == "residual" and float(self.count_A.sum()) > 0:
+            # With sigma = ratio * sigma_eps the ridge sigma_eps^2 / sigma^2 is fixed, so the mean
+            # does not depend on sigma_eps and Cov_a = sigma_eps^2 (Phi Phi^T + I / ratio^2)^-1:
+            # re-estimating sigma_eps rescales the square root, with no second factorisation.
+            new_noise = max(self.noise_floor, math.sqrt(residual_variance(self, mean_AD)))
+            sqrt_cov_ADD = sqrt_cov_ADD * (new_noise / self.noise_std)
+            self.noise_std, self.prior_std = new_noise, self.prior_ratio * new_noise
         repaired = int((jitter_A > 0).sum())
         self.jitter_events += repaired
         self.last_jitter = float(jitter_A.max()) if repaired else 0.0
@@ -397,18 +431,26 @@ class BLRHead:
         of bounded size. ``generator`` must live on the head's device.
         """
         phi_BD = self._phi32(phi_BD)
-        q_BA = phi_BD @ self._mean32_AD.T
+        return phi_BD @ self._mean32_AD.T + self.q_noise(phi_BD, generator)
+
+    @torch.no_grad()
+    def q_noise(
+        self, phi_BD: torch.Tensor, generator: torch.Generator | None = None
+    ) -> torch.Tensor:
+        """The random part of ``q_sample``: sqrt(cov_scale) phi^T U_a z with a fresh z per row and
+        action, shape (B, A); its variance is ``predictive_var``."""
+        phi_BD = self._phi32(phi_BD)
         a, d = self.num_actions, self.dim
+        noise_BA = torch.empty(phi_BD.shape[0], a, dtype=torch.float32, device=self.device)
         scale = math.sqrt(self.cov_scale)
         step = self._block_rows()
         for lo in range(0, phi_BD.shape[0], step):
-            blk_KD = phi_BD[lo : lo + step]
-            phiu_KAD = (blk_KD @ self._sqrt_cov32_DX).view(-1, a, d)
+            phiu_KAD = (phi_BD[lo : lo + step] @ self._sqrt_cov32_DX).view(-1, a, d)
             z_KAD = torch.randn(
                 phiu_KAD.shape, generator=generator, device=self.device, dtype=torch.float32
             )
-            q_BA[lo : lo + step] += scale * (phiu_KAD * z_KAD).sum(-1)
-        return q_BA
+            noise_BA[lo : lo + step] = scale * (phiu_KAD * z_KAD).sum(-1)
+        return noise_BA
 
     @torch.no_grad()
     def sample_weights(self, n: int, generator: torch.Generator | None = None) -> torch.Tensor:
@@ -475,12 +517,16 @@ class BLRHead:
             "noise_std": self.noise_std,
             "cov_scale": self.cov_scale,
             "forgetting": self.forgetting,
+            "scale": self.scale,
+            "noise_floor": self.noise_floor,
+            "prior_ratio": self.prior_ratio,
             "jitter_events": self.jitter_events,
             "last_jitter": self.last_jitter,
             "num_refreshes": self.num_refreshes,
             "phiphiT_ADD": self.phiphiT_ADD.clone(),
             "phiy_AD": self.phiy_AD.clone(),
             "count_A": self.count_A.clone(),
+            "yy_A": self.yy_A.clone(),
             "mean_AD": self._mean_AD.clone(),
             "sqrt_cov_ADD": self._sqrt_cov_ADD.clone(),
         }
@@ -497,6 +543,9 @@ class BLRHead:
         self.noise_std = float(state["noise_std"])
         self.cov_scale = float(state["cov_scale"])
         self.forgetting = float(state["forgetting"])
+        self.scale = str(state.get("scale", "fixed"))
+        self.noise_floor = float(state.get("noise_floor", self.noise_std))
+        self.prior_ratio = float(state.get("prior_ratio", self.prior_std / self.noise_std))
         self.jitter_events = int(state["jitter_events"])
         self.last_jitter = float(state["last_jitter"])
         self.num_refreshes = int(state["num_refreshes"])
@@ -507,6 +556,7 @@ class BLRHead:
         self.phiphiT_ADD = _t("phiphiT_ADD")
         self.phiy_AD = _t("phiy_AD")
         self.count_A = _t("count_A")
+        self.yy_A = _t("yy_A") if "yy_A" in state else torch.zeros_like(self.count_A)
         self._mean_AD = _t("mean_AD")
         self._sqrt_cov_ADD = _t("sqrt_cov_ADD")
         self._rebuild_cache()
@@ -522,3 +572,21 @@ def greedy_predictive_variance(head: BLRHead, phi_BD: torch.Tensor) -> float:
         raise ValueError("greedy_predictive_variance needs at least one row of features")
     greedy_B = head.q_mean(phi_BD).argmax(dim=1)
     return float(head.predictive_var_action(phi_BD, greedy_B).mean())
+
+
+@torch.no_grad()
+def residual_variance(head: BLRHead, mean_AD: torch.Tensor | None = None) -> float:
+    """Mean squared residual of the regression targets under a weight mean, pooled over actions.
+
+    sum_a ||y_a - Phi_a^T m_a||^2 / sum_a n_a, from the statistics alone:
+    ||y - Phi^T m||^2 = sum y^2 - 2 m^T Phi y + m^T Phi Phi^T m. The weights are the
+    forgetting-weighted counts, so with forgetting it is a weighted mean. ``mean_AD`` defaults to
+    the head's posterior mean (stats dtype). Returns 0 when the head holds no data.
+    """
+    m_AD = head._mean_AD if mean_AD is None else mean_AD.to(head.stats_dtype)
+    n = float(head.count_A.sum())
+    if n <= 0:
+        return 0.0
+    fit_A = torch.einsum("ad,ade,ae->a", m_AD, head.phiphiT_ADD, m_AD)
+    rss = float((head.yy_A - 2.0 * (m_AD * head.phiy_AD).sum(-1) + fit_A).sum())
+    return max(rss, 0.0) / n

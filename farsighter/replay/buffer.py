@@ -284,9 +284,11 @@ class ReplayBuffer:
             )
         e_B = np.concatenate(chosen_e)
         start_B = np.concatenate(chosen_l)
-        return self._gather(e_B, start_B, k, gamma)
+        return self.gather(e_B, start_B, k, gamma)
 
-    def _gather(self, e_B: np.ndarray, start_B: np.ndarray, k: int, gamma: float) -> Batch:
+    def gather(self, e_B: np.ndarray, start_B: np.ndarray, k: int, gamma: float) -> Batch:
+        """The k-step windows starting at logical rows ``start_B`` of streams ``e_B`` (valid
+        starts only: see :meth:`sample_indices`, which checks them)."""
         rows_BK = (start_B[:, None] + np.arange(k)[None, :]) % self.capacity
         flags_BK = self.flags[e_B[:, None], rows_BK]
         rewards_BK = self.rewards[e_B[:, None], rows_BK]
@@ -360,7 +362,7 @@ class ReplayBuffer:
     ) -> Batch:
         """k-step batch at the given candidate starts, keeping only the valid ones."""
         ok_B, _ = self.valid_mask(e_B, start_B, k, stride)
-        return self._gather(e_B[ok_B], start_B[ok_B], k, gamma)
+        return self.gather(e_B[ok_B], start_B[ok_B], k, gamma)
 
     # ------------------------------------------------------------------ whole episodes
     def episode_bounds(self) -> tuple[np.ndarray, np.ndarray, np.ndarray]:

@@ -1,0 +1,282 @@
+"""Issue #12's pieces, each against what it says: the residual-scaled posterior on synthetic data
+with known noise, each redraw mode drawing exactly when it says, the refresh cadence, the
+propagating targets, the k-step target's max, the general preset, and the chain task."""
+
+from __future__ import annotations
+
+import math
+from pathlib import Path
+
+import gymnasium as gym
+import numpy as np
+import pytest
+import torch
+
+from farsighter.agents.farsighter import FarsighterAgent
+from farsighter.config import PRESETS, make_config, validate
+from farsighter.envs import make_env
+from farsighter.envs.chain import ChainEnv, chain_id
+from farsighter.errors import ConfigError, EnvError
+from farsighter.ops.blr import BLRHead, residual_variance
+from farsighter.replay import VectorStep
+from tests.conftest import tiny
+
+
+# ------------------------------------------------------------------ the scaled posterior
+def _synthetic(noise: float, n: int = 20_000, d: int = 5, seed: int = 0):
+    g = torch.Generator().manual_seed(seed)
+    phi = torch.randn(n, d, generator=g, dtype=torch.float64)
+    w = torch.randn(2, d, generator=g, dtype=torch.float64) * 3
+    a = torch.randint(0, 2, (n,), generator=g)
+    y = (phi * w[a]).sum(1) + noise * torch.randn(n, generator=g, dtype=torch.float64)
+    return phi, a, y
+
+
+@pytest.mark.parametrize("noise", [3.0, 20.0])
+def test_residual_scale_recovers_a_known_noise(noise: float) -> None:
+    phi, a, y = _synthetic(noise)
+    head = BLRHead(num_actions=2, dim=5, prior_std=2.0, noise_std=1.0, scale="residual")
+    head.fit(phi, a, y)
+    assert head.noise_std == pytest.approx(noise, rel=0.03)
+    assert head.prior_std == pytest.approx(2.0 * head.noise_std)  # the ratio is kept
+    # The covariance is Eq. 9's at the estimated sigmas.
+    fixed = BLRHead(
+        num_actions=2, dim=5, prior_std=head.prior_std, noise_std=head.noise_std, scale="fixed"
+    )
+    fixed.fit(phi, a, y)
+    mean, cov = head.posterior()
+    mean_f, cov_f = fixed.posterior()
+    assert torch.allclose(mean, mean_f, rtol=1e-8, atol=1e-10)
+    assert torch.allclose(cov, cov_f, rtol=1e-6, atol=1e-14)
+
+
+def test_residual_scale_never_goes_below_its_floor() -> None:
+    phi, a, y = _synthetic(0.05)
+    head = BLRHead(num_actions=2, dim=5, prior_std=1.0, noise_std=1.0, scale="residual")
+    head.fit(phi, a, y)
+    assert head.noise_std == 1.0 and head.prior_std == 1.0
+
+
+def test_residual_variance_matches_the_residuals() -> None:
+    phi, a, y = _synthetic(2.0, n=500)
+    head = BLRHead(num_actions=2, dim=5, prior_std=1.0, noise_std=1.0)
+    head.fit(phi, a, y)
+    mean, _ = head.posterior()
+    direct = ((y - (phi * mean[a]).sum(1)) ** 2).mean()
+    assert residual_variance(head) == pytest.approx(float(direct), rel=1e-9)
+    assert residual_variance(BLRHead(num_actions=2, dim=5)) == 0.0
+
+
+def test_scaled_head_round_trips_its_state() -> None:
+    phi, a, y = _synthetic(4.0, n=300)
+    head = BLRHead(num_actions=2, dim=5, scale="residual")
+    head.fit(phi, a, y)
+    other = BLRHead(num_actions=2, dim=5)
+    other.load_state_dict(head.state_dict())
+    assert other.scale == "residual" and other.noise_std == head.noise_std
+    assert torch.equal(other.yy_A, head.yy_A)
+    with pytest.raises(ValueError, match="scale must be one of fixed, residual"):
+        BLRHead(num_actions=2, dim=5, scale="data")
+
+
+def test_q_noise_has_the_predictive_variance() -> None:
+    phi, a, y = _synthetic(1.0, n=50)
+    head = BLRHead(num_actions=2, dim=5, prior_std=1.0, noise_std=1.0)
+    head.fit(phi, a, y)
+    x = torch.randn(1, 5).expand(20_000, 5)
+    noise = head.q_noise(x, generator=torch.Generator().manual_seed(0))
+    assert torch.allclose(noise.var(0), head.predictive_var(x[:1])[0], rtol=0.05)
+    assert noise.mean(0).abs().max() < 0.05
+
+
+# ------------------------------------------------------------------ the agent
+def make_agent(tmp_path: Path, algo: str = "farsighter", **kw: object) -> FarsighterAgent:
+    cfg = tiny(algo, tmp_path, **{"learning_starts": 0, **kw})
+    env = gym.make("CartPole-v1")
+    return FarsighterAgent(
+        cfg, env.observation_space, env.action_space, frame_stack=1, device=torch.device("cpu")
+    )
+
+
+def _act_and_end(agent: FarsighterAgent, steps: int, episode_ends: set[int]) -> list[int]:
+    """Act ``steps`` times; the episode ends after the steps in ``episode_ends``. Returns the
+    draw counter after each step."""
+    obs = np.zeros((1, 4), np.float32)
+    draws = []
+    for t in range(steps):
+        action = agent.act(obs, 10)
+        end = t in episode_ends
+        final = [obs[0]] if end else None
+        agent.observe(
+            VectorStep(obs, action, np.zeros(1), np.array([end]), np.array([False]), final)
+        )
+        draws.append(agent.counters.draws)
+    return draws
+
+
+@pytest.mark.parametrize(
+    ("redraw", "k", "every", "expected_draw_steps"),
+    [
+        ("step", 5, 1, list(range(20))),
+        ("k", 5, 1, [0, 5, 10, 15]),
+        ("k", 3, 1, [0, 3, 6, 9, 12, 15, 18]),
+        ("every", 5, 7, [0, 7, 14]),
+        ("episode", 5, 1, [0, 4, 12]),  # episodes end after steps 3 and 11
+    ],
+)
+def test_each_redraw_mode_draws_exactly_when_it_says(
+    tmp_path: Path, redraw: str, k: int, every: int, expected_draw_steps: list[int]
+) -> None:
+    agent = make_agent(tmp_path, k=k, blr__redraw=redraw, blr__redraw_every=every)
+    draws = _act_and_end(agent, 20, episode_ends={3, 11})
+    drawn_at = [t for t in range(20) if draws[t] > (draws[t - 1] if t else 0)]
+    assert drawn_at == expected_draw_steps
+
+
+def test_incremental_posterior_refreshes_every_M_steps(tmp_path: Path) -> None:
+    agent = make_agent(
+        tmp_path, blr__mode="incremental", blr__posterior_every=100, learning_starts=50
+    )
+    rng = np.random.default_rng(0)
+    for step in range(1, 1_001):
+        obs = rng.normal(size=(1, 4)).astype(np.float32)
+        end = step % 30 == 0
+        agent.observe(
+            VectorStep(
+                obs,
+                agent.act(obs, step),
+                np.ones(1),
+                np.array([end]),
+                np.array([False]),
+                [obs[0]] if end else None,
+            )
+        )
+        agent.learn(step)
+    assert agent.head.num_refreshes == 10  # steps 100, 200, ..., 1000
+    assert agent.counters.refreshes == 10
+
+
+def test_sample_target_adds_the_posterior_spread(tmp_path: Path) -> None:
+    agent = make_agent(tmp_path, blr__target="sample", blr__prior_std=5.0, k=1)
+    mean_agent = make_agent(tmp_path, blr__target="mean", blr__prior_std=5.0, k=1)
+    mean_agent.torso.load_state_dict(agent.torso.state_dict())
+    mean_agent.torso_target.load_state_dict(agent.torso_target.state_dict())
+    from farsighter.agents.common import TensorBatch
+
+    n = 4_000
+    obs = torch.zeros(n, 4) + 0.5
+    t = TensorBatch(obs, obs, torch.zeros(n, dtype=torch.int64), torch.zeros(n), torch.ones(n))
+    y_sample, y_mean = agent._targets(t), mean_agent._targets(t)
+    assert torch.allclose(y_mean, y_mean[:1].expand(n))  # no randomness under the mean
+    assert y_sample.std() > 0.5  # one draw per row
+    assert y_sample.mean() > y_mean[0]  # the max over noisy values is optimistic
+
+
+def test_k_target_max_is_the_larger_of_the_k_and_one_step_targets(tmp_path: Path) -> None:
+    agent = make_agent(tmp_path, k=4, k_target="max")
+    feed_rng = np.random.default_rng(3)
+    for t in range(300):
+        end = t % 25 == 24
+        obs = feed_rng.normal(size=(1, 4)).astype(np.float32)
+        agent.observe(
+            VectorStep(
+                obs,
+                feed_rng.integers(0, 2, 1),
+                feed_rng.normal(size=1),
+                np.array([end]),
+                np.array([False]),
+                [obs[0]] if end else None,
+            )
+        )
+    captured = {}
+    original = agent._targets
+
+    def spy(t):  # record every target computed during one update
+        y = original(t)
+        captured.setdefault("ys", []).append(y)
+        return y
+
+    agent._targets = spy  # type: ignore[method-assign]
+    agent.update()
+    y_k, y_1 = captured["ys"]
+    # the second call is the one-step target of the same starts; the update used their max
+    assert y_k.shape == y_1.shape
+    assert (torch.maximum(y_k, y_1) >= y_k).all()
+    assert not torch.equal(y_k, y_1)
+
+
+# ------------------------------------------------------------------ presets
+def test_auto_gives_discrete_tasks_the_general_preset_and_keeps_table_1_selectable() -> None:
+    cfg = make_config("farsighter", "farsighter/Chain10-v0")
+    assert cfg.preset == "general"
+    assert (cfg.blr.mode, cfg.blr.posterior_every, cfg.blr.scale) == (
+        "incremental",
+        100,
+        "residual",
+    )
+    assert (cfg.blr.target, cfg.blr.redraw, cfg.k_target, cfg.k) == ("sample", "episode", "max", 10)
+    bdqn = make_config("bdqn", "CartPole-v1")
+    assert (bdqn.blr.redraw, bdqn.k_target, bdqn.k) == ("episode", "k", 1)
+    control = make_config("farsighter", "CartPole-v1", preset="control")
+    assert (control.blr.mode, control.blr.posterior_every, control.blr.scale) == (
+        "batch",
+        10_000,
+        "fixed",
+    )
+    assert (control.blr.prior_std, control.blr.noise_std, control.blr.redraw) == (0.1, 1.0, "step")
+    assert (control.blr.target, control.k_target) == ("mean", "k")
+    assert make_config("bdqn", "CartPole-v1", preset="control").blr.redraw == "every"
+    assert make_config("bdqn", "CartPole-v1", preset="bdqn").blr.target == "thompson"
+    atari = make_config("farsighter", "ALE/Pong-v5")
+    assert (atari.preset, atari.blr.posterior_every, atari.blr.scale) == ("atari", 100_000, "fixed")
+    # the DQN family is the control column either way
+    ddqn_general = make_config("ddqn", "CartPole-v1")
+    ddqn_control = make_config("ddqn", "CartPole-v1", preset="control")
+    assert ddqn_general.lr == ddqn_control.lr and ddqn_general.eps_end == ddqn_control.eps_end
+    assert "general" in PRESETS and PRESETS["general"].per_algo["farsighter"]["k_target"] == "max"
+    # a flag still wins over the preset's per-algorithm values
+    assert make_config("farsighter", "CartPole-v1", blr__redraw="step").blr.redraw == "step"
+
+
+def test_k_target_max_is_refused_where_it_does_nothing() -> None:
+    with pytest.raises(ConfigError, match="k_target max is only supported by --algo bdqn and"):
+        validate(make_config("kddqn", "CartPole-v1", k_target="max"))
+
+
+# ------------------------------------------------------------------ the chain
+def test_chain_pays_at_the_end_of_the_right_moves_and_ends_on_a_wrong_one() -> None:
+    env = ChainEnv(length=6)
+    env.reset(seed=0)
+    total, ended = 0.0, False
+    for a in env.right_L:
+        _, r, ended, truncated, _ = env.step(a)
+        total += r
+        assert not truncated
+    assert ended and total == pytest.approx(0.99)
+    env.reset()
+    _, r, ended, _, info = env.step(1 - env.right_L[0])
+    assert (r, ended, info["position"]) == (0.0, True, 0)
+
+
+def test_chain_layout_is_fixed_by_length_and_layout_seed_not_by_reset() -> None:
+    a, b = ChainEnv(length=30), ChainEnv(length=30)
+    a.reset(seed=1)
+    b.reset(seed=2)
+    assert np.array_equal(a.right_L, b.right_L)
+    assert not np.array_equal(a.right_L, ChainEnv(length=30, layout_seed=1).right_L)
+    assert 5 < a.right_L.sum() < 25  # both actions are needed
+
+
+def test_chain_ids_are_registered_on_first_use() -> None:
+    env = make_env(make_config("ddqn", chain_id(7)), seed=0)
+    obs, _ = env.reset(seed=0)
+    assert obs.shape == (7,) and obs[0] == 1.0 and math.isclose(float(obs.sum()), 1.0)
+    with pytest.raises(EnvError, match="length must be >= 2"):
+        make_env(make_config("ddqn", "farsighter/Chain1-v0"), seed=0)
+
+
+def test_minigrid_observations_are_flat_and_scaled() -> None:
+    env = make_env(make_config("ddqn", "MiniGrid-DoorKey-5x5-v0"), seed=0)
+    obs, _ = env.reset(seed=0)
+    assert obs.shape == (147,) and obs.dtype == np.float32
+    assert 0.0 <= obs.min() and obs.max() <= 1.0
