@@ -25,6 +25,8 @@ commands:
   maze      the bridge-maze study (paper Fig. 1): farsighter maze [--quick] [--out DIR]
   robotics  the continuous-control study (Fig. 3, Table 3):
             farsighter robotics --env Walker2d-v5 --steps 30000 --seeds 1 2 3 [--quick]
+  explore   the exploration suite (chain, MiniGrid, MountainCar at growing sizes):
+            farsighter explore [--quick] [--families chain doorkey] [--sizes 5 10] [--out DIR]
   train     train an agent:   farsighter train --algo farsighter --env CartPole-v1 [--help]
             continue a run:   farsighter train --run-dir DIR --resume [--total-steps N]
   eval      evaluate a run:   farsighter eval RUN_DIR [--episodes 10]
@@ -193,9 +195,16 @@ def cmd_robotics(argv: Sequence[str]) -> int:
     return robotics_main(argv)
 
 
+def cmd_explore(argv: Sequence[str]) -> int:
+    from farsighter.studies.explore import main as explore_main
+
+    return explore_main(argv)
+
+
 COMMANDS: dict[str, Callable[[Sequence[str]], int]] = {
     "maze": cmd_maze,
     "robotics": cmd_robotics,
+    "explore": cmd_explore,
     "train": cmd_train,
     "eval": cmd_eval,
     "plot": cmd_plot,

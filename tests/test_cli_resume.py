@@ -110,8 +110,8 @@ def test_algo_env_preset_choose_the_defaults() -> None:
     assert cfg == make_config("farsighter", "CartPole-v1", "cartpole", k=3)
     assert train_config(["--algo", "farsighter", "--preset=cartpole", "--k=3"]) == cfg
     # auto is stored resolved, given or not
-    assert train_config(["--preset", "auto"]).preset == "control"
-    assert train_config([]).preset == "control"
+    assert train_config(["--preset", "auto"]).preset == "general"
+    assert train_config([]).preset == "general"
     assert train_config(["--algo", "naf", "--env", "Pendulum-v1"]).preset == "continuous"
     # flags the first pass leaves alone: nested fields, negative numbers, lists, bool flags
     cfg = train_config(

@@ -2,10 +2,11 @@
 
 The runner parses a study command's flags (:class:`StudyArgs`, with tyro like ``farsighter
 train``) and checks them, builds the grid (every agent x seed, a run directory
-``runs/<slug>__s<seed>`` each), keeps the study's settings in ``study.json``, resumes an
-interrupted study (finished runs are kept, unfinished ones rerun), runs the jobs in worker
-processes with one progress bar, loads the saved files of the finished runs and hands them to the
-study's outputs, which ``--plot-only`` redraws.
+``runs/<slug>__s<seed>`` each; a study with tasks runs every agent x task x seed, in
+``runs/<task slug>/<slug>__s<seed>``, each task with its own step budget), keeps the study's
+settings in ``study.json``, resumes an interrupted study (finished runs are kept, unfinished
+ones rerun), runs the jobs in worker processes with one progress bar, loads the saved files of
+the finished runs and hands them to the study's outputs, which ``--plot-only`` redraws.
 """
 
 from __future__ import annotations
@@ -30,7 +31,11 @@ from farsighter.config import Config, make_config, validate
 from farsighter.errors import ConfigError, FarsighterError
 
 Runs = dict[str, list[dict[str, Any]]]
-"""Per agent label, one dict per finished seed: ``"seed"`` and the run's saved files."""
+"""Per agent label, one dict per finished run: ``"seed"``, ``"steps"`` (its budget), ``"task"``
+(the environment id of a study with tasks, else None) and the run's saved files."""
+
+Task = tuple[str, int]
+"""One task of a study with tasks: an environment id and its step budget."""
 
 
 @dataclass(frozen=True)
@@ -47,8 +52,19 @@ def slug(label: str) -> str:
     return "".join(c if c.isalnum() else "-" for c in label.lower()).strip("-").replace("--", "-")
 
 
-def run_dir_of(out: Path, label: str, seed: int) -> Path:
-    return out / "runs" / f"{slug(label)}__s{seed}"
+@dataclass(frozen=True)
+class Job:
+    """One run of the grid: an agent, a seed, its budget, and its task (None without tasks)."""
+
+    label: str
+    seed: int
+    steps: int
+    task: str | None = None
+
+    def run_dir(self, out: Path) -> Path:
+        """``runs/<slug>__s<seed>``, under ``runs/<task slug>/`` in a study with tasks."""
+        runs = out / "runs" / slug(self.task) if self.task else out / "runs"
+        return runs / f"{slug(self.label)}__s{self.seed}"
 
 
 def run_config(
@@ -131,8 +147,9 @@ class Study:
     """The default settings (a frozen dataclass with the fields of :class:`Settings`)."""
     quick: Any
     """The settings of ``--quick``."""
-    run_config: Callable[[Agent, Any, int, Path], Config]
-    """(agent, settings, seed, run_dir) -> the run's config."""
+    run_config: Callable[..., Config]
+    """(agent, settings, seed, run_dir) -> the run's config; in a study with tasks, (agent,
+    settings, seed, run_dir, task) with the task's :data:`Task` (environment id, budget)."""
     write_outputs: Callable[[Path, dict[str, Any], Runs], None]
     """(study directory, its study.json, the finished runs) -> figures, tables, report."""
     run_files: tuple[str, ...]
@@ -150,12 +167,30 @@ class Study:
     """The study's own checks of its settings (raise :class:`FarsighterError`)."""
     name: Callable[[Any], str] | None = None
     """settings -> the default study directory's name under studies/ (default: kind)."""
+    tasks: Callable[[Any], tuple[Task, ...]] | None = None
+    """settings -> the tasks (environment id, step budget): the grid is then agent x task x seed
+    and ``settings.steps`` is the study's to interpret (each run's budget is its task's)."""
 
     def agent(self, label: str) -> Agent:
         return next(a for a in self.agents if a.label == label)
 
     def labels(self) -> tuple[str, ...]:
         return tuple(a.label for a in self.agents)
+
+    def grid(self, settings: Any) -> list[Job]:
+        """Every run of the study: agent x seed, or agent x task x seed."""
+        tasks = self.tasks(settings) if self.tasks else ((None, settings.steps),)
+        return [
+            Job(label, seed, steps, env)
+            for label in settings.agents
+            for env, steps in tasks
+            for seed in settings.seeds
+        ]
+
+    def config(self, settings: Any, job: Job, run_dir: Path) -> Config:
+        """The config of one run of the grid."""
+        task = () if job.task is None else ((job.task, job.steps),)
+        return self.run_config(self.agent(job.label), settings, job.seed, run_dir, *task)
 
 
 # ------------------------------------------------------------------------------------------------
@@ -199,9 +234,14 @@ def out_dir(study: Study, settings: Any, args: StudyArgs) -> Path:
 def _help(study: Study) -> str:
     q = study.quick
     labels = ", ".join(repr(label) for label in study.labels())
+    if study.tasks:
+        tasks = study.tasks(q)
+        budget = f"{len(tasks)} tasks ({', '.join(f'{env} {n:,}' for env, n in tasks)} steps)"
+    else:
+        budget = f"{q.steps:,} steps"
     return (
         f"{study.description}\n\n--quick: {', '.join(q.agents)}; {len(q.seeds)} seeds x "
-        f"{q.steps:,} steps. Agents (--agents): {labels}."
+        f"{budget}. Agents (--agents): {labels}."
     )
 
 
@@ -244,7 +284,10 @@ def check(study: Study, settings: Settings) -> None:
             settings.workers >= 0,
             f"--workers must be >= 0 (0: one per core; got {settings.workers})",
         ),
-        (settings.steps >= 1, f"--steps must be >= 1 (got {settings.steps})"),
+        (
+            study.tasks is not None or settings.steps >= 1,
+            f"--steps must be >= 1 (got {settings.steps})",
+        ),
         (len(settings.seeds) >= 1, "--seeds must name at least one seed"),
         (all(s >= 0 for s in settings.seeds), f"--seeds must be >= 0 (got {seeds})"),
         (len(set(settings.seeds)) == len(settings.seeds), f"--seeds name a seed twice ({seeds})"),
@@ -260,35 +303,34 @@ def check(study: Study, settings: Settings) -> None:
             raise FarsighterError(message)
     if study.check:
         study.check(settings)
-    for label in settings.agents:
-        for seed in settings.seeds:
-            try:
-                validate(study.run_config(study.agent(label), settings, seed, Path(".")))
-            except ConfigError as exc:
-                raise ConfigError(f"{study.kind} agent '{label}': {exc}") from None
+    for job in study.grid(settings):
+        try:
+            validate(study.config(settings, job, Path(".")))
+        except ConfigError as exc:
+            task = f" on {job.task}" if job.task else ""
+            raise ConfigError(f"{study.kind} agent '{job.label}'{task}: {exc}") from None
 
 
 def run_study(study: Study, settings: Any, out: Path, show_progress: bool = True) -> Path:
-    """Run (or resume) every agent x seed, then write the study's outputs."""
-    jobs = _prepare(study, settings, out)
-    n_runs = len(settings.agents) * len(settings.seeds)
-    if jobs:
+    """Run (or resume) every agent x seed (x task), then write the study's outputs."""
+    todo = _prepare(study, settings, out)
+    if todo:
         execute(
             _run,
-            jobs,
-            steps=settings.steps,
+            [(study, settings, job, str(job.run_dir(out))) for job in todo],
+            steps=[job.steps for job in todo],
             workers=settings.workers or os.cpu_count() or 1,
             desc=f"{study.kind} study",
             show_progress=show_progress,
-            done_before=(n_runs - len(jobs)) * settings.steps,
+            done_before=sum(job.steps for job in study.grid(settings)) - sum(j.steps for j in todo),
         )
     _write(study, out)
     return out
 
 
-def _prepare(study: Study, settings: Any, out: Path) -> list[tuple[Any, ...]]:
-    """Save the settings (a study.json with other settings is refused) and list the runs to do:
-    a finished run is kept, an unfinished one removed and done again."""
+def _prepare(study: Study, settings: Any, out: Path) -> list[Job]:
+    """Save the settings (a study.json with other settings is refused) and list the runs to do,
+    the longest first: a finished run is kept, an unfinished one removed and done again."""
     out.mkdir(parents=True, exist_ok=True)
     saved = out / "study.json"
     current = json.loads(json.dumps(dataclasses.asdict(settings)))
@@ -300,16 +342,15 @@ def _prepare(study: Study, settings: Any, out: Path) -> list[tuple[Any, ...]]:
                 "--overwrite"
             )
     saved.write_text(json.dumps(current, indent=2) + "\n")
-    jobs = []
-    for label in settings.agents:
-        for seed in settings.seeds:
-            run_dir = run_dir_of(out, label, seed)
-            if _finished(study, run_dir):
-                continue
-            if run_dir.exists():
-                shutil.rmtree(run_dir)  # interrupted: its callbacks' state is gone, rerun it
-            jobs.append((study, label, settings, seed, str(run_dir)))
-    return jobs
+    todo = []
+    for job in study.grid(settings):
+        run_dir = job.run_dir(out)
+        if _finished(study, run_dir):
+            continue
+        if run_dir.exists():
+            shutil.rmtree(run_dir)  # interrupted: its callbacks' state is gone, rerun it
+        todo.append(job)
+    return sorted(todo, key=lambda job: -job.steps)  # stable: the grid's order among equals
 
 
 def _finished(study: Study, run_dir: Path) -> bool:
@@ -331,13 +372,13 @@ class Progress:
         self.progress[self.key] = -1
 
 
-def _run(study: Study, label: str, settings: Any, seed: int, run_dir: str, progress: Any) -> str:
+def _run(study: Study, settings: Any, job: Job, run_dir: str, progress: Any) -> str:
     """One job (in a worker process): train the run with the study's callback."""
     from farsighter.train import train
 
-    cfg = study.run_config(study.agent(label), settings, seed, Path(run_dir))
+    cfg = study.config(settings, job, Path(run_dir))
     callbacks = [study.callback(settings)] if study.callback else []
-    train(cfg, callbacks=[*callbacks, Progress(progress, f"{label}|{seed}")])
+    train(cfg, callbacks=[*callbacks, Progress(progress, run_dir)])
     return run_dir
 
 
@@ -345,21 +386,21 @@ def execute(
     fn: Callable[..., Any],
     jobs: Sequence[tuple[Any, ...]],
     *,
-    steps: int,
+    steps: Sequence[int],
     workers: int,
     desc: str,
     show_progress: bool,
     done_before: int = 0,
 ) -> None:
     """Call ``fn(*job, progress)`` for every job, where ``progress`` maps a run key to its current
-    step (a run sets it, and -1 when done); each job is ``steps`` steps long. ``workers == 1``
+    step (a run sets it, and -1 when done); job i is ``steps[i]`` steps long. ``workers == 1``
     runs in this process (no interpreter start-up); otherwise fresh spawned interpreters, so
     nothing is shared by accident. A worker's error is re-raised here."""
     import multiprocessing as mp
 
     from tqdm import tqdm
 
-    total = done_before + len(jobs) * steps
+    total = done_before + sum(steps)
     bar = tqdm(
         total=total,
         initial=done_before,
@@ -371,22 +412,24 @@ def execute(
     try:
         if workers == 1:
             local: dict[str, int] = {}
-            for i, job in enumerate(jobs):
+            for job, n in zip(jobs, steps, strict=True):
                 fn(*job, local)
-                bar.n = done_before + (i + 1) * steps
-                bar.refresh()
+                bar.update(n)
             return
         ctx = mp.get_context("spawn")
         with ctx.Manager() as manager:
             shared = manager.dict()
             finished = 0
             with ProcessPoolExecutor(workers, mp_context=ctx) as pool:
-                pending = {pool.submit(fn, *job, shared) for job in jobs}
+                length = {
+                    pool.submit(fn, *job, shared): n for job, n in zip(jobs, steps, strict=True)
+                }
+                pending = set(length)
                 while pending:
                     done, pending = wait(pending, timeout=1.0, return_when=FIRST_COMPLETED)
                     for fut in done:
                         fut.result()
-                        finished += steps
+                        finished += length[fut]
                     running = sum(v for v in shared.values() if v > 0)
                     bar.n = done_before + finished + running
                     bar.refresh()
@@ -416,20 +459,29 @@ def _write(study: Study, out: Path) -> None:
 
 
 def load_runs(study: Study, out: Path) -> tuple[dict[str, Any], Runs]:
-    """``study.json``, and per agent the saved files of its finished runs (seed order)."""
+    """``study.json``, and per agent the saved files of its finished runs (task, then seed
+    order)."""
     saved = json.loads((out / "study.json").read_text())
     runs: Runs = {}
-    for label in saved["agents"]:
-        for seed in saved["seeds"]:
-            run_dir = run_dir_of(out, label, seed)
-            if _finished(study, run_dir):
-                files = {Path(name).stem: _read(run_dir / name) for name in study.run_files}
-                runs.setdefault(label, []).append({"seed": seed, **files})
+    for job in study.grid(settings_of(study, saved)):
+        run_dir = job.run_dir(out)
+        if _finished(study, run_dir):
+            files = {Path(name).stem: _read(run_dir / name) for name in study.run_files}
+            run = {"seed": job.seed, "steps": job.steps, "task": job.task, **files}
+            runs.setdefault(job.label, []).append(run)
     if not runs:
         raise FarsighterError(
             f"{out} holds no finished {study.kind} runs (runs/*/{' and '.join(study.finished)})"
         )
     return saved, runs
+
+
+def settings_of(study: Study, saved: dict[str, Any]) -> Any:
+    """The settings saved in a study.json as the study's dataclass (lists as tuples; a key that
+    is no field of it any more is left out)."""
+    fields = {f.name for f in dataclasses.fields(study.full)}
+    values = {k: tuple(v) if isinstance(v, list) else v for k, v in saved.items() if k in fields}
+    return dataclasses.replace(study.full, **values)
 
 
 def _read(file: Path) -> Any:
