@@ -60,7 +60,9 @@ class BLRConfig:
     whole minibatch (the BDQN authors' code). sample: a fresh posterior draw per target row is
     added to both the online and the target Q of s' (argmax and value), so uncertainty about
     the next state raises the target: optimism propagates back along the chain of bootstraps,
-    as in randomised value functions (Osband et al. 2019); our extension, not the paper's."""
+    as in randomised value functions (Osband et al. 2019); our extension, not the paper's. With
+    gamma = 1 that optimism is not discounted along loops (on the bridge maze, with the general
+    posterior, Farsighter failed 2 of 2 seeds that the maze preset solves: docs/results/explore)."""
     posterior_sampling: Literal["recent", "uniform"] = "recent"
     """Batch-mode refresh tuples: the latest D transitions (Table 1's 'most recent'), or D starts
     drawn uniformly from the whole buffer with replacement (the BDQN authors' code)."""

@@ -78,7 +78,8 @@ def test_preset_then_algorithm_then_flags() -> None:
     assert make_config("ddqn", "CartPole-v1", preset="cartpole").eps_end == 0.02
     assert make_config("ob2i", "CartPole-v1", preset="cartpole", eps_end=0.05).eps_end == 0.05
     # a preset made for one algorithm is its variant: applied over its values, refused elsewhere
-    assert make_config("bdqn", "CartPole-v1").blr.redraw == "every"
+    assert make_config("bdqn", "CartPole-v1", preset="control").blr.redraw == "every"
+    assert make_config("bdqn", "CartPole-v1").blr.redraw == "episode"  # general, per algorithm
     assert make_config("bdqn", "CartPole-v1", preset="bdqn").blr.redraw == "step"
     with pytest.raises(ConfigError, match="preset 'bdqn' is made for --algo bdqn"):
         make_config("farsighter", "CartPole-v1", preset="bdqn")
