@@ -376,7 +376,8 @@ class Preset:
     """Values for one algorithm that apply over that algorithm's own (defining) values."""
 
 
-# Table 1, robotic/low-dimensional column (the control preset; general starts from it).
+# Table 1, robotic/low-dimensional column (the control preset; general starts from it, and the
+# atari preset from its shared rows).
 _CONTROL: dict[str, Any] = {
     "optimizer": "rmsprop",
     "lr": 0.0025,
@@ -444,18 +445,10 @@ PRESETS: dict[str, Preset] = {
             "Farsighter paper Table 1; learning_starts, epsilon schedule and eval epsilon from "
             "Dopamine's DQN/Rainbow Atari configs (Castro et al. 2018)",
             {
-                "optimizer": "rmsprop",
-                "lr": 0.0025,
-                "rmsprop_alpha": 0.95,
-                "gamma": 0.99,
-                "train_every": 4,
-                "batch_size": 32,
-                "buffer_size": 1_000_000,
+                **_CONTROL,  # the rows Table 1's two columns share
                 "target_update_every": 10_000,  # N = 10k (Atari)
                 "blr.posterior_every": 100_000,  # M = 10 N
                 "blr.posterior_samples": 100_000,  # D = 100k tuples
-                "blr.prior_std": 0.1,
-                "blr.noise_std": 1.0,
                 "learning_starts": 20_000,  # Dopamine min_replay_history
                 "eps_end": 0.01,  # Dopamine epsilon_train
                 "eps_decay_steps": 250_000,  # Dopamine epsilon_decay_period (agent steps)

@@ -16,6 +16,7 @@ import numpy as np
 
 from farsighter import algorithms
 from farsighter.config import Config, is_atari_id
+from farsighter.envs.chain import register_chain
 from farsighter.errors import EnvError
 
 # Ids registered by gymnasium-robotics (imported lazily: it is an optional extra).
@@ -44,8 +45,6 @@ def _register_builtin(env_id: str) -> None:
     # Importing registers ``farsighter/BridgeMaze-v0`` and friends (idempotent); a chain id
     # ``farsighter/Chain<L>-v0`` is registered when first named.
     importlib.import_module("farsighter.envs.maze")
-    from farsighter.envs.chain import register_chain
-
     register_chain(env_id)
 
 

@@ -436,9 +436,8 @@ def _markdown_table(table: list[dict[str, Any]]) -> str:
         "median steps to solve",
         "median episodes to first reward",
     ]
-    lines = ["| " + " | ".join(head) + " |", "|" + "---|" * len(head)]
-    for r in table:
-        cells = [
+    cells = [
+        [
             r["family"],
             str(r["size"]),
             f"{r['budget']:,}",
@@ -449,8 +448,9 @@ def _markdown_table(table: list[dict[str, Any]]) -> str:
             _median(r["median_steps_to_solve"], r["steps_censored"]),
             _median(r["median_episodes_to_first_reward"], r["first_reward_censored"]),
         ]
-        lines.append("| " + " | ".join(cells) + " |")
-    return "\n".join(lines) + "\n"
+        for r in table
+    ]
+    return runner.markdown_table(head, cells)
 
 
 def _fit_text(fit: dict[str, Any], key: str) -> str:
@@ -467,19 +467,12 @@ def _markdown_growth(fits: list[dict[str, Any]]) -> str:
         "exponential rate r",
         "fits better",
     ]
-    lines = ["| " + " | ".join(head) + " |", "|" + "---|" * len(head)]
+    cells = []
     for f in fits:
         fitted = f["better"] != "not enough sizes"
-        cells = [
-            f["family"],
-            f["agent"],
-            str(f["n_sizes"]),
-            _fit_text(f, "p") if fitted else "",
-            _fit_text(f, "r") if fitted else "",
-            f["better"],
-        ]
-        lines.append("| " + " | ".join(cells) + " |")
-    return "\n".join(lines) + "\n"
+        p, r = (_fit_text(f, "p"), _fit_text(f, "r")) if fitted else ("", "")
+        cells.append([f["family"], f["agent"], str(f["n_sizes"]), p, r, f["better"]])
+    return runner.markdown_table(head, cells)
 
 
 def _plot(family: str, table: list[dict[str, Any]], fits: list[dict[str, Any]], file: Path) -> None:
@@ -657,16 +650,21 @@ def _write_report(
         "",
         "## Tasks and budgets",
         "",
-        "| family | size | environment | budget (steps) | evaluation | solved at |",
-        "|---|---|---|---|---|---|",
     ]
-    for r in dict((r["env"], r) for r in table).values():
-        fam = FAMILIES[r["family"]]
-        lines.append(
-            f"| {r['family']} | {r['size']} | `{r['env']}` | {r['budget']:,} | "
-            f"{fam.eval_episodes} episode(s) every {fam.eval_every:,} steps | "
-            f"mean return >= {fmt(fam.threshold)} |"
-        )
+    tasks = [
+        [
+            r["family"],
+            str(r["size"]),
+            f"`{r['env']}`",
+            f"{r['budget']:,}",
+            f"{FAMILIES[r['family']].eval_episodes} episode(s) every "
+            f"{FAMILIES[r['family']].eval_every:,} steps",
+            f"mean return >= {fmt(FAMILIES[r['family']].threshold)}",
+        ]
+        for r in dict((r["env"], r) for r in table).values()
+    ]
+    head = ["family", "size", "environment", "budget (steps)", "evaluation", "solved at"]
+    lines += runner.markdown_table(head, tasks).splitlines()
     lines += [""]
     lines += [f"- {name}: {FAMILIES[name].solved}." for name in families]
     lines += [

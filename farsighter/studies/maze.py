@@ -305,14 +305,11 @@ def _write_table(rows: list[dict[str, Any]], out: Path) -> None:
 
 
 def _markdown_table(rows: list[dict[str, Any]]) -> str:
-    lines = [
-        "| " + " | ".join(head for head, _ in MARKDOWN_COLUMNS) + " |",
-        "|" + "---|" * len(MARKDOWN_COLUMNS),
-    ]
+    cells = []
     for r in rows:
         r = {**r, "greedy_solves": f"{r['greedy_success_seeds']}/{r['seeds']}"}
-        lines.append("| " + " | ".join(fmt(r[key]) for _, key in MARKDOWN_COLUMNS) + " |")
-    return "\n".join(lines) + "\n"
+        cells.append([fmt(r[key]) for _, key in MARKDOWN_COLUMNS])
+    return runner.markdown_table([head for head, _ in MARKDOWN_COLUMNS], cells)
 
 
 # ------------------------------------------------------------------------------------------------

@@ -187,7 +187,7 @@ def _markdown_table(rows: list[dict[str, Any]], goal: bool) -> str:
     head = ["agent", "seeds", "final return (ours)", "paper Table 3 (30k steps)"]
     if goal:
         head.insert(2, "final success rate (ours)")
-    lines = ["| " + " | ".join(head) + " |", "|" + "---|" * len(head)]
+    table = []
     for r in rows:
         cells = [
             r["agent"],
@@ -197,8 +197,8 @@ def _markdown_table(rows: list[dict[str, Any]], goal: bool) -> str:
         ]
         if goal:
             cells.insert(2, _pm(r["final_success_mean"], r["final_success_std"], 2))
-        lines.append("| " + " | ".join(cells) + " |")
-    return "\n".join(lines) + "\n"
+        table.append(cells)
+    return runner.markdown_table(head, table)
 
 
 def _claims(by: dict[str, float], measure: str) -> list[str]:
