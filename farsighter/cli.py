@@ -27,6 +27,9 @@ commands:
             farsighter robotics --env Walker2d-v5 --steps 30000 --seeds 1 2 3 [--quick]
   explore   the exploration suite (chain, MiniGrid, MountainCar at growing sizes):
             farsighter explore [--quick] [--families chain doorkey] [--sizes 5 10] [--out DIR]
+  atari     the Atari study (Fig. 2, Table 2), on ALE games or MinAtar:
+            farsighter atari --games Breakout Pong --steps 100000 [--quick]
+            farsighter atari --games minatar --steps 200000 --seeds 1 2
   train     train an agent:   farsighter train --algo farsighter --env CartPole-v1 [--help]
             continue a run:   farsighter train --run-dir DIR --resume [--total-steps N]
   eval      evaluate a run:   farsighter eval RUN_DIR [--episodes 10]
@@ -201,10 +204,17 @@ def cmd_explore(argv: Sequence[str]) -> int:
     return explore_main(argv)
 
 
+def cmd_atari(argv: Sequence[str]) -> int:
+    from farsighter.studies.atari import main as atari_main
+
+    return atari_main(argv)
+
+
 COMMANDS: dict[str, Callable[[Sequence[str]], int]] = {
     "maze": cmd_maze,
     "robotics": cmd_robotics,
     "explore": cmd_explore,
+    "atari": cmd_atari,
     "train": cmd_train,
     "eval": cmd_eval,
     "plot": cmd_plot,

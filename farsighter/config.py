@@ -99,7 +99,8 @@ class AtariConfig:
     frame_skip: int = 4
     """Environment frames per agent step (max-pooled over the last two)."""
     noop_max: int = 30
-    """Up to this many no-op actions at the start of an episode."""
+    """Each game starts with a uniform 1..noop_max no-op emulator frames, in training and
+    evaluation (0: none)."""
     screen_size: int = 84
     """Side of the square grey observation."""
     frame_stack: int = 4
@@ -110,6 +111,10 @@ class AtariConfig:
     """Training only: clip rewards to their sign."""
     repeat_action_probability: float = 0.0
     """Sticky actions (ALE v5 uses 0.25); 0 reproduces the DQN/BDQN protocol."""
+    max_frames_per_episode: int = 108_000
+    """Emulator frames after which ALE truncates an episode, no-ops included (108,000 frames =
+    30 minutes of play; ALE v5's max_num_frames_per_episode, Machado et al. 2018); training
+    and evaluation."""
 
 
 @dataclass(frozen=True)
@@ -318,7 +323,9 @@ class Config:
     eval_epsilon: float = 0.0
     """Epsilon of the evaluation policy (greedy under the posterior mean for Bayesian agents)."""
     eval_max_steps: int = 27_000
-    """Cap on steps of one evaluation episode."""
+    """Cap on agent steps of one evaluation episode (27,000 = 108,000 frames at frame skip 4).
+    ALE ids are also truncated by the emulator at atari.max_frames_per_episode frames, which
+    binds first."""
     checkpoint_every: int = 25_000
     """Steps between checkpoints (0: only at the end)."""
     save_replay: bool = True
@@ -453,12 +460,43 @@ PRESETS: dict[str, Preset] = {
                 "eps_end": 0.01,  # Dopamine epsilon_train
                 "eps_decay_steps": 250_000,  # Dopamine epsilon_decay_period (agent steps)
                 "eval_epsilon": 0.001,  # Dopamine epsilon_eval
+                "eval_max_steps": 27_000,  # 108,000 frames / frame skip 4 (ALE v5's episode cap)
                 "eval_every": 250_000,
                 "eval_episodes": 10,
                 "checkpoint_every": 250_000,
                 "save_replay": False,  # a 1M-frame buffer is 7 GB; opt in with --save-replay
                 "log_every": 10_000,
             },
+        ),
+        Preset(
+            "minatar",
+            "MinAtar (what `auto` gives a MinAtar id): Young & Tian's DQN settings for the "
+            "learning (one update per step, 100k buffer, target copied every 1k steps, epsilon "
+            "1 to 0.1 over 100k steps after a 5k-step start), with the general preset's "
+            "posterior for the Bayesian agents.",
+            "Young & Tian 2019, MinAtar (examples/dqn.py of kenjyoung/MinAtar: batch 32, "
+            "buffer 100k, target update 1k, training every frame, replay start 5k, epsilon "
+            "1 -> 0.1 over 100k frames, centred RMSProp lr 2.5e-4, decay 0.95, eps 0.01, "
+            "Huber loss, gamma 0.99); the posterior settings are the general preset's",
+            {
+                **_CONTROL,
+                "lr": 0.00025,
+                "optim_eps": 0.01,
+                "rmsprop_centered": True,
+                "train_every": 1,
+                "buffer_size": 100_000,
+                "learning_starts": 5_000,
+                "target_update_every": 1_000,
+                "eps_start": 1.0,
+                "eps_end": 0.1,
+                "eps_decay_steps": 105_000,  # 100k steps of decay after the 5k-step start
+                "loss": "huber",
+                "eval_every": 50_000,
+                "eval_episodes": 10,
+                "eval_epsilon": 0.0,
+                **_FRESH_POSTERIOR,
+            },
+            per_algo=_FRESH_PER_ALGO,
         ),
         Preset(
             "bdqn",
@@ -605,6 +643,11 @@ def _nested_replace(obj: Any, dotted: dict[str, Any]) -> Any:
     return dataclasses.replace(obj, **direct)
 
 
+def is_minatar_id(env_id: str) -> bool:
+    """True for MinAtar ids (``MinAtar/Breakout-v1``) without importing minatar."""
+    return env_id.split(":")[-1].startswith("MinAtar/")
+
+
 def is_atari_id(env_id: str) -> bool:
     """True for ALE ids (``ALE/Pong-v5``, ``PongNoFrameskip-v4``) without importing ale-py."""
     name = env_id.split(":")[-1]
@@ -612,10 +655,13 @@ def is_atari_id(env_id: str) -> bool:
 
 
 def resolve_preset_name(preset: str, env: str, algo: str = "") -> str:
-    """auto: atari for ALE ids, continuous for the NAF agents, general otherwise."""
+    """auto: atari for ALE ids, minatar for MinAtar ids, continuous for the NAF agents, general
+    otherwise."""
     if preset == "auto":
         if is_atari_id(env):
             return "atari"
+        if is_minatar_id(env):
+            return "minatar"
         continuous = algo and algorithms.get(algo).actions == "continuous"
         return "continuous" if continuous else "general"
     if preset not in PRESETS:
@@ -697,6 +743,22 @@ def _run_checks(cfg: Config, spec: algorithms.Algorithm) -> list[tuple[bool, str
             f"k ({cfg.k}) must not exceed the per-environment buffer ({cfg.buffer_size // cfg.num_envs})",
         ),
         (all(h > 0 for h in cfg.hidden_sizes), "hidden_sizes must be positive integers"),
+        (cfg.atari.frame_skip >= 1, f"atari.frame_skip must be >= 1 (got {cfg.atari.frame_skip})"),
+        (
+            cfg.atari.frame_stack >= 1,
+            f"atari.frame_stack must be >= 1 (got {cfg.atari.frame_stack})",
+        ),
+        (cfg.atari.noop_max >= 0, f"atari.noop_max must be >= 0 (got {cfg.atari.noop_max})"),
+        (
+            0.0 <= cfg.atari.repeat_action_probability <= 1.0,
+            "atari.repeat_action_probability must be in [0, 1] (0.25: sticky actions, Machado et "
+            f"al. 2018; got {cfg.atari.repeat_action_probability})",
+        ),
+        (
+            cfg.atari.max_frames_per_episode >= 0,
+            "atari.max_frames_per_episode must be >= 0 (0: no cap; got "
+            f"{cfg.atari.max_frames_per_episode})",
+        ),
         (cfg.blr.prior_std > 0, f"blr.prior_std must be > 0 (got {cfg.blr.prior_std})"),
         (cfg.blr.noise_std > 0, f"blr.noise_std must be > 0 (got {cfg.blr.noise_std})"),
         (cfg.blr.cov_scale > 0, f"blr.cov_scale must be > 0 (got {cfg.blr.cov_scale})"),

@@ -1,4 +1,5 @@
-"""Representation networks phi_theta(s): an MLP for flat observations, the Nature CNN for images."""
+"""Representation networks phi_theta(s): an MLP for flat observations, the Nature CNN for images,
+the MinAtar CNN for MinAtar's 10x10 object planes."""
 
 from __future__ import annotations
 
@@ -50,10 +51,41 @@ class NatureCNN(nn.Module):
         return self.fc(self.conv(obs_BCHW.float() / 255.0))
 
 
-def make_torso(obs_space: gym.spaces.Box, hidden_sizes: tuple[int, ...]) -> MLPTorso | NatureCNN:
-    """Images (C, H, W) get the Nature CNN; flat vectors get the MLP."""
+MINATAR_SCREEN = 10
+"""Side of MinAtar's observations: images of this side get the MinAtar CNN."""
+
+
+class MinAtarCNN(nn.Module):
+    """Young & Tian (2019) MinAtar torso: 16 3x3 filters, stride 1 (10x10 -> 8x8), then 128 units.
+    Its input is 0/1 object planes (uint8 or bool), cast to float without scaling."""
+
+    HIDDEN = 128
+
+    def __init__(self, in_channels: int, screen: int = MINATAR_SCREEN) -> None:
+        super().__init__()
+        self.conv = nn.Sequential(nn.Conv2d(in_channels, 16, 3, stride=1), nn.ReLU(), nn.Flatten())
+        self.n_flat = 16 * (screen - 2) * (screen - 2)  # 1024 on 10x10 planes
+        self.fc = nn.Sequential(nn.Linear(self.n_flat, self.HIDDEN), nn.ReLU())
+        self.out_dim = self.HIDDEN
+
+    def forward(self, obs_BCHW: torch.Tensor) -> torch.Tensor:
+        return self.fc(self.conv(obs_BCHW.float()))
+
+
+def is_minatar_shape(shape: tuple[int, ...]) -> bool:
+    """A (C, 10, 10) image: MinAtar's channels-first object planes."""
+    return len(shape) == 3 and shape[1] == shape[2] == MINATAR_SCREEN
+
+
+def make_torso(
+    obs_space: gym.spaces.Box, hidden_sizes: tuple[int, ...]
+) -> MLPTorso | NatureCNN | MinAtarCNN:
+    """Images (C, 10, 10) get the MinAtar CNN, other images (C, H, W) the Nature CNN; flat
+    vectors get the MLP."""
     shape = obs_space.shape
     assert shape is not None
+    if is_minatar_shape(shape):
+        return MinAtarCNN(shape[0], shape[1])
     if len(shape) == 3:
         return NatureCNN(shape[0], shape[1])
     return MLPTorso(int(np.prod(shape)), hidden_sizes)
@@ -85,13 +117,30 @@ class NatureConvTrunk(nn.Module):
         return self.conv(obs_BCHW.float() / 255.0)
 
 
+class MinAtarConvTrunk(nn.Module):
+    """The MinAtar CNN without its 128-unit layer: conv layer and flatten, ``out_dim`` = 1024 on
+    10x10 planes, for networks whose heads each own that layer (OB2I)."""
+
+    def __init__(self, in_channels: int, screen: int = MINATAR_SCREEN) -> None:
+        super().__init__()
+        cnn = MinAtarCNN(in_channels, screen)
+        self.conv = cnn.conv  # MinAtarCNN's layers, so the two stay identical; its fc is dropped
+        self.out_dim = cnn.n_flat
+
+    def forward(self, obs_BCHW: torch.Tensor) -> torch.Tensor:
+        return self.conv(obs_BCHW.float())
+
+
 def make_trunk(
     obs_space: gym.spaces.Box, hidden_sizes: tuple[int, ...]
-) -> tuple[MLPTorso | NatureConvTrunk, int]:
-    """``make_torso`` without its last hidden layer, and that layer's width (512 for images), for
-    heads that each get their own copy of it. A one-layer MLP leaves the flattened observation."""
+) -> tuple[MLPTorso | NatureConvTrunk | MinAtarConvTrunk, int]:
+    """``make_torso`` without its last hidden layer, and that layer's width (512 for Atari
+    images, 128 for MinAtar planes), for heads that each get their own copy of it. A one-layer
+    MLP leaves the flattened observation."""
     shape = obs_space.shape
     assert shape is not None
+    if is_minatar_shape(shape):
+        return MinAtarConvTrunk(shape[0], shape[1]), MinAtarCNN.HIDDEN
     if len(shape) == 3:
         return NatureConvTrunk(shape[0], shape[1]), 512
     if not hidden_sizes:

@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import re
 from typing import Any, NamedTuple
 
 import gymnasium as gym
@@ -77,6 +78,28 @@ ATARI_49: tuple[str, ...] = tuple(TABLE2)
 def ale_id(game: str) -> str:
     """``Breakout`` -> ``ALE/Breakout-v5``."""
     return f"ALE/{game}-v5"
+
+
+# The two id forms that farsighter.config.is_atari_id treats as Atari.
+_ALE_ID = re.compile(r"ALE/([A-Za-z0-9]+)-v\d+|([A-Za-z0-9]+)NoFrameskip-v\d+")
+
+
+def ale_name(env_id: str) -> str | None:
+    """The game named by an ALE id as written there (``ALE/Pitfall-v5`` -> ``Pitfall``, also
+    ``PitfallNoFrameskip-v4`` and a ``module:`` prefix), whether or not it is in Table 2; None
+    for any other id."""
+    match = _ALE_ID.fullmatch(env_id.split(":")[-1])
+    if match is None:
+        return None
+    return match.group(1) or match.group(2)
+
+
+def game_of(env_id: str) -> str | None:
+    """The Table 2 key of an ALE id, the inverse of `ale_id`: ``ALE/Breakout-v5`` ->
+    ``Breakout`` (also ``BreakoutNoFrameskip-v4``); None for a non-ALE id and for an ALE game
+    outside the 49 (``ALE/Pitfall-v5``), so a key it returns always indexes TABLE2."""
+    name = ale_name(env_id)
+    return name if name in TABLE2 else None
 
 
 class EpisodicLife(gym.Wrapper):

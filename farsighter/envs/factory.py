@@ -1,5 +1,6 @@
 """One environment factory for every agent: any Gymnasium id, Atari preprocessing for ALE ids,
-goal-conditioned (dict-observation) robotics tasks flattened to vectors."""
+MinAtar's planes channels-first, goal-conditioned (dict-observation) robotics tasks flattened to
+vectors."""
 
 from __future__ import annotations
 
@@ -17,6 +18,7 @@ import numpy as np
 from farsighter import algorithms
 from farsighter.config import Config, is_atari_id
 from farsighter.envs.chain import register_chain
+from farsighter.envs.minatar import MinAtarChannelsFirst, is_minatar_id, register_minatar
 from farsighter.errors import EnvError
 
 # Ids registered by gymnasium-robotics (imported lazily: it is an optional extra).
@@ -80,6 +82,7 @@ def _make_base(env_id: str, cfg: Config, render_mode: str | None) -> gym.Env:
     _register_builtin(env_id)
     _register_robotics(env_id)
     _register_minigrid(env_id)
+    register_minatar(env_id)
     kwargs: dict[str, Any] = {}
     if render_mode is not None:
         kwargs["render_mode"] = render_mode
@@ -95,6 +98,7 @@ def _make_base(env_id: str, cfg: Config, render_mode: str | None) -> gym.Env:
         # The preprocessing wrapper skips frames itself, so the emulator must not.
         kwargs["frameskip"] = 1
         kwargs["repeat_action_probability"] = cfg.atari.repeat_action_probability
+        kwargs["max_num_frames_per_episode"] = cfg.atari.max_frames_per_episode
     try:
         return gym.make(env_id, **kwargs)
     except gym.error.DependencyNotInstalled as exc:
@@ -104,8 +108,8 @@ def _make_base(env_id: str, cfg: Config, render_mode: str | None) -> gym.Env:
     except (gym.error.Error, ImportError, AttributeError) as exc:
         raise EnvError(
             f"cannot make environment '{env_id}': {_first_line(exc)} (accepted: any registered "
-            "Gymnasium id such as CartPole-v1, ALE/Breakout-v5, farsighter/BridgeMaze-v0, or "
-            "module:EnvId)"
+            "Gymnasium id such as CartPole-v1, ALE/Breakout-v5, MinAtar/Breakout-v1, "
+            "farsighter/BridgeMaze-v0, or module:EnvId)"
         ) from None
     except Exception as exc:  # an environment constructor failing is a user-facing problem too
         raise EnvError(f"cannot make environment '{env_id}': {_first_line(exc)}") from None
@@ -121,6 +125,8 @@ def make_env(
     else:
         if is_minigrid_id(cfg.env):
             env = MiniGridImage(env)
+        if is_minatar_id(cfg.env):  # no Atari preprocessing, no frame stack (frame_stack_of: 1)
+            env = MinAtarChannelsFirst(env)
         if is_goal_space(env.observation_space):
             env = FlattenGoalObservation(env, include_achieved=cfg.naf.her)
         env = gym.wrappers.RecordEpisodeStatistics(env)
