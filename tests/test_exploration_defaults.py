@@ -214,7 +214,9 @@ def test_auto_gives_discrete_tasks_the_general_preset_and_keeps_table_1_selectab
         100,
         "residual",
     )
-    assert (cfg.blr.target, cfg.blr.redraw, cfg.k_target, cfg.k) == ("sample", "episode", "max", 10)
+    assert (cfg.blr.target, cfg.blr.redraw, cfg.k_target, cfg.k) == ("sample", "step", "max", 10)
+    cartpole = make_config("farsighter", "CartPole-v1", preset="cartpole")  # as measured
+    assert (cartpole.blr.redraw, cartpole.k_target) == ("episode", "max")
     bdqn = make_config("bdqn", "CartPole-v1")
     assert (bdqn.blr.redraw, bdqn.k_target, bdqn.k) == ("episode", "k", 1)
     control = make_config("farsighter", "CartPole-v1", preset="control")

@@ -151,17 +151,49 @@ def _wrap_atari(env: gym.Env, cfg: Config, training: bool) -> gym.Env:
     )
 
 
-def make_vector_env(cfg: Config, *, seed: int) -> gym.vector.SyncVectorEnv:
+def make_vector_env(cfg: Config, *, seed: int) -> gym.vector.VectorEnv:
     """Training environments, stepped together; an ended episode resets in the same step and its
-    last observation is in ``info["final_obs"]`` (needed to bootstrap after truncation)."""
+    last observation is in ``info["final_obs"]`` (needed to bootstrap after truncation). ALE
+    games go through envpool when ``atari.backend`` says so (:mod:`farsighter.envs.envpool_vec`:
+    the same preprocessing and step contract), everything else through Gymnasium's
+    synchronous vector env."""
 
     # Build one first so that a bad id fails with our one-line error, not inside the vector env.
     make_env(cfg, seed=seed, training=True).close()
+    if is_atari_id(cfg.env) and _use_envpool(cfg):
+        from farsighter.envs.envpool_vec import make_envpool_atari
+
+        a = cfg.atari
+        return make_envpool_atari(
+            cfg.env,
+            cfg.num_envs,
+            seed,
+            frame_skip=a.frame_skip,
+            noop_max=a.noop_max,
+            screen_size=a.screen_size,
+            frame_stack=a.frame_stack,
+            training=True,
+            terminal_on_life_loss=a.terminal_on_life_loss,
+            clip_rewards=a.clip_rewards,
+            repeat_action_probability=a.repeat_action_probability,
+            max_episode_steps=a.max_frames_per_episode // a.frame_skip or 2**31 - 1,
+            num_threads=a.envpool_threads,
+        )
     return gym.vector.SyncVectorEnv(
         # partials (not lambdas) keep the vector env picklable, so checkpoints can hold it.
         [partial(make_env, cfg, seed=seed + i, training=True) for i in range(cfg.num_envs)],
         autoreset_mode=gym.vector.AutoresetMode.SAME_STEP,
     )
+
+
+def _use_envpool(cfg: Config) -> bool:
+    """auto: envpool when installed, the game is there and noop_max >= 1; an explicit envpool
+    that cannot serve the game fails with one line in :func:`make_envpool_atari`."""
+    if cfg.atari.backend == "auto":
+        from farsighter.envs.envpool_vec import envpool_supports
+
+        return envpool_supports(cfg.env, cfg.atari.noop_max)
+    return cfg.atari.backend == "envpool"
 
 
 class MiniGridImage(gym.ObservationWrapper):

@@ -316,12 +316,12 @@ def _table(rows: list[dict[str, Any]]) -> str:
 
 
 def _aggregate_table(agg: list[dict[str, Any]]) -> str:
-    head = ["agent", "games", "best mean score in", "ALE games", "mean HNS", "median HNS"]
+    head = ["agent", "games", "games led (best mean score)", "ALE games", "mean HNS", "median HNS"]
     cells = [
         [
             a["agent"],
             str(a["games"]),
-            f"{a['games_best']} games",
+            str(a["games_best"]),
             str(a["ale_games"]),
             _num(a["hns_mean"], 3),
             _num(a["hns_median"], 3),

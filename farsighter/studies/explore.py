@@ -131,7 +131,9 @@ AGENTS: tuple[Agent, ...] = (
     Agent("DDQN", "ddqn"),
     Agent("k-DDQN", "kddqn"),
     Agent("BDQN", "bdqn"),
-    Agent("Farsighter", "farsighter"),  # the library's default redraw
+    # the library's default: a draw per step (Algorithm 2) since the DoorKey runs; per episode when
+    # docs/results/explore/report.md (the chain) was made, so there "Farsighter" is per episode
+    Agent("Farsighter", "farsighter"),
     Agent("Farsighter (redraw step)", "farsighter", {"blr.redraw": "step"}),
     Agent("Farsighter (redraw k)", "farsighter", {"blr.redraw": "k"}),
     Agent("Farsighter (redraw episode)", "farsighter", {"blr.redraw": "episode"}),
