@@ -59,7 +59,7 @@ def test_each_suite_gets_its_preset(tmp_path: Path) -> None:
     # Young & Tian's DQN settings, the general posterior, Farsighter's own k
     assert (cfg.train_every, cfg.target_update_every, cfg.lr) == (1, 1_000, 0.00025)
     assert (cfg.eps_end, cfg.learning_starts, cfg.loss) == (0.1, 5_000, "huber")
-    assert (cfg.blr.mode, cfg.blr.redraw, cfg.k) == ("incremental", "episode", 10)
+    assert (cfg.blr.mode, cfg.blr.redraw, cfg.k_target, cfg.k) == ("incremental", "step", "max", 10)
     assert cfg.buffer_size == 50_000  # the run is shorter than MinAtar's 100k buffer
     assert (cfg.seed, cfg.total_steps, cfg.eval_every) == (3, 50_000, study.eval_every)
     ale = run_config(far, study, 3, tmp_path, ale_task)

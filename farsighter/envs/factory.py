@@ -135,20 +135,24 @@ def make_env(
     return env
 
 
+def _preprocessing(cfg: Config, training: bool) -> dict[str, Any]:
+    """The Atari preprocessing settings both backends take (Gymnasium wrappers and envpool)."""
+    a = cfg.atari
+    return {
+        "frame_skip": a.frame_skip,
+        "noop_max": a.noop_max,
+        "screen_size": a.screen_size,
+        "frame_stack": a.frame_stack,
+        "training": training,
+        "terminal_on_life_loss": a.terminal_on_life_loss,
+        "clip_rewards": a.clip_rewards,
+    }
+
+
 def _wrap_atari(env: gym.Env, cfg: Config, training: bool) -> gym.Env:
     from farsighter.envs.atari import wrap_atari
 
-    a = cfg.atari
-    return wrap_atari(
-        env,
-        frame_skip=a.frame_skip,
-        noop_max=a.noop_max,
-        screen_size=a.screen_size,
-        frame_stack=a.frame_stack,
-        training=training,
-        terminal_on_life_loss=a.terminal_on_life_loss,
-        clip_rewards=a.clip_rewards,
-    )
+    return wrap_atari(env, **_preprocessing(cfg, training))
 
 
 def make_vector_env(cfg: Config, *, seed: int) -> gym.vector.VectorEnv:
@@ -168,13 +172,7 @@ def make_vector_env(cfg: Config, *, seed: int) -> gym.vector.VectorEnv:
             cfg.env,
             cfg.num_envs,
             seed,
-            frame_skip=a.frame_skip,
-            noop_max=a.noop_max,
-            screen_size=a.screen_size,
-            frame_stack=a.frame_stack,
-            training=True,
-            terminal_on_life_loss=a.terminal_on_life_loss,
-            clip_rewards=a.clip_rewards,
+            **_preprocessing(cfg, training=True),
             repeat_action_probability=a.repeat_action_probability,
             max_episode_steps=a.max_frames_per_episode // a.frame_skip or 2**31 - 1,
             num_threads=a.envpool_threads,
