@@ -28,12 +28,11 @@ import tyro
 from farsighter.config import Config, is_minatar_id
 from farsighter.envs.atari import ATARI_49, TABLE2, ale_id, game_of
 from farsighter.envs.atari_scores import human_normalized
+from farsighter.envs.minatar import MINATAR_GAMES, minatar_id
 from farsighter.errors import FarsighterError
 from farsighter.studies import runner
 from farsighter.studies.claims import Measure, compare
 from farsighter.studies.runner import Agent, Runs, StudyArgs, Task, band, figure
-
-MINATAR_GAMES: tuple[str, ...] = ("Asterix", "Breakout", "Freeway", "Seaquest", "SpaceInvaders")
 
 AGENTS: tuple[Agent, ...] = (
     Agent("DDQN", "ddqn"),
@@ -108,7 +107,7 @@ def env_id(game: str) -> str:
     if game.startswith("MinAtar/"):
         name = game.removeprefix("MinAtar/").split("-v")[0]
         if name in MINATAR_GAMES:
-            return f"MinAtar/{name}-v1"
+            return minatar_id(name)
     by_case = {g.lower(): g for g in (*TABLE2, *(f"MinAtar/{m}" for m in MINATAR_GAMES))}
     hint = f" (did you mean {by_case[game.lower()]}?)" if game.lower() in by_case else ""
     raise FarsighterError(
