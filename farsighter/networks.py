@@ -1,15 +1,57 @@
 """Representation networks phi_theta(s): an MLP for flat observations, the Nature CNN for images,
-the MinAtar CNN for MinAtar's 10x10 object planes."""
+the MinAtar CNN for MinAtar's 10x10 object planes.
+
+Every torso returns float32 features. With ``precision = "bf16"`` (:func:`set_precision`) its
+layers run under bfloat16 autocast and the features are cast back to float32, so what comes after
+the torso (linear heads, the BLR posterior, targets, losses) stays float32. Parameters and
+optimizer state are float32 either way. The Nature CNN keeps its convolutions channels-last
+(NHWC), the layout oneDNN and cuDNN convolve fastest; the math is the same.
+"""
 
 from __future__ import annotations
+
+from typing import Literal
 
 import gymnasium as gym
 import numpy as np
 import torch
 from torch import nn
 
+Precision = Literal["fp32", "bf16"]
 
-class MLPTorso(nn.Module):
+
+class Torso(nn.Module):
+    """What the torsos share: ``forward`` runs :meth:`body` in the torso's precision and returns
+    float32 features of width ``out_dim``."""
+
+    out_dim: int
+
+    def __init__(self) -> None:
+        super().__init__()
+        self.precision: Precision = "fp32"
+
+    def body(self, obs: torch.Tensor) -> torch.Tensor:
+        raise NotImplementedError
+
+    def forward(self, obs: torch.Tensor) -> torch.Tensor:
+        if self.precision == "fp32":
+            return self.body(obs)
+        with torch.autocast(obs.device.type, dtype=torch.bfloat16):
+            return self.body(obs).float()
+
+
+def set_precision(module: nn.Module, precision: Precision) -> None:
+    """Set the precision of every torso inside ``module`` (fp32 or bf16 autocast)."""
+    for sub in module.modules():
+        if isinstance(sub, Torso):
+            sub.precision = precision
+
+
+def _channels_last(frames_BCHW: torch.Tensor) -> torch.Tensor:
+    return frames_BCHW.contiguous(memory_format=torch.channels_last)
+
+
+class MLPTorso(Torso):
     """Fully connected ReLU layers; ``out_dim`` is the feature dimension d."""
 
     def __init__(self, obs_dim: int, hidden_sizes: tuple[int, ...]) -> None:
@@ -22,11 +64,11 @@ class MLPTorso(nn.Module):
         self.net = nn.Sequential(*layers)
         self.out_dim = last
 
-    def forward(self, obs_BO: torch.Tensor) -> torch.Tensor:
+    def body(self, obs_BO: torch.Tensor) -> torch.Tensor:
         return self.net(obs_BO.float().flatten(1))
 
 
-class NatureCNN(nn.Module):
+class NatureCNN(Torso):
     """Mnih et al. (2015) torso of appendix 9.1.1: 32x8s4, 64x4s2, 64x3s1, then 512 units."""
 
     def __init__(self, in_channels: int, screen: int = 84) -> None:
@@ -42,20 +84,23 @@ class NatureCNN(nn.Module):
         )
         with torch.no_grad():
             n_flat = self.conv(torch.zeros(1, in_channels, screen, screen)).shape[1]
+        for layer in self.conv:  # NHWC weights (Module.to(memory_format=...) does the same)
+            if isinstance(layer, nn.Conv2d):
+                layer.weight.data = layer.weight.data.contiguous(memory_format=torch.channels_last)
         self.fc = nn.Sequential(nn.Linear(n_flat, 512), nn.ReLU())
         self.n_flat = int(n_flat)  # width of the convolutions' output (3136 on 84x84 frames)
         self.out_dim = 512
 
-    def forward(self, obs_BCHW: torch.Tensor) -> torch.Tensor:
+    def body(self, obs_BCHW: torch.Tensor) -> torch.Tensor:
         # uint8 frames are scaled here, so the replay and the acting path keep bytes.
-        return self.fc(self.conv(obs_BCHW.float() / 255.0))
+        return self.fc(self.conv(_channels_last(obs_BCHW.float() / 255.0)))
 
 
 MINATAR_SCREEN = 10
 """Side of MinAtar's observations: images of this side get the MinAtar CNN."""
 
 
-class MinAtarCNN(nn.Module):
+class MinAtarCNN(Torso):
     """Young & Tian (2019) MinAtar torso: 16 3x3 filters, stride 1 (10x10 -> 8x8), then 128 units.
     Its input is 0/1 object planes (uint8 or bool), cast to float without scaling."""
 
@@ -68,7 +113,7 @@ class MinAtarCNN(nn.Module):
         self.fc = nn.Sequential(nn.Linear(self.n_flat, self.HIDDEN), nn.ReLU())
         self.out_dim = self.HIDDEN
 
-    def forward(self, obs_BCHW: torch.Tensor) -> torch.Tensor:
+    def body(self, obs_BCHW: torch.Tensor) -> torch.Tensor:
         return self.fc(self.conv(obs_BCHW.float()))
 
 
@@ -103,7 +148,7 @@ class QNetwork(nn.Module):
         return self.head(self.torso(obs))
 
 
-class NatureConvTrunk(nn.Module):
+class NatureConvTrunk(Torso):
     """The Nature CNN without its 512-unit layer: conv layers and flatten, ``out_dim`` = n_flat
     (3136 on 84x84 frames), for networks whose heads each own that layer (OB2I)."""
 
@@ -113,11 +158,11 @@ class NatureConvTrunk(nn.Module):
         self.conv = cnn.conv  # NatureCNN's layers, so the two stay identical; its fc is dropped
         self.out_dim = cnn.n_flat
 
-    def forward(self, obs_BCHW: torch.Tensor) -> torch.Tensor:
-        return self.conv(obs_BCHW.float() / 255.0)
+    def body(self, obs_BCHW: torch.Tensor) -> torch.Tensor:
+        return self.conv(_channels_last(obs_BCHW.float() / 255.0))
 
 
-class MinAtarConvTrunk(nn.Module):
+class MinAtarConvTrunk(Torso):
     """The MinAtar CNN without its 128-unit layer: conv layer and flatten, ``out_dim`` = 1024 on
     10x10 planes, for networks whose heads each own that layer (OB2I)."""
 
@@ -127,7 +172,7 @@ class MinAtarConvTrunk(nn.Module):
         self.conv = cnn.conv  # MinAtarCNN's layers, so the two stay identical; its fc is dropped
         self.out_dim = cnn.n_flat
 
-    def forward(self, obs_BCHW: torch.Tensor) -> torch.Tensor:
+    def body(self, obs_BCHW: torch.Tensor) -> torch.Tensor:
         return self.conv(obs_BCHW.float())
 
 

@@ -14,6 +14,7 @@ import torch
 from farsighter import algorithms
 from farsighter.agents.protocol import Agent, AgentFactory
 from farsighter.config import Config
+from farsighter.networks import set_precision
 
 __all__ = ["Agent", "AgentFactory", "build_agent"]
 
@@ -31,4 +32,8 @@ def build_agent(
     if not isinstance(obs_space, gym.spaces.Box):  # farsighter.envs.check_spaces says why
         raise TypeError(f"{cfg.algo} needs a Box observation space, got {obs_space}")
     factory: AgentFactory = importlib.import_module(f"farsighter.agents.{spec.agent}").AGENT
-    return factory(cfg, obs_space, act_space, frame_stack=frame_stack, device=device)
+    agent = factory(cfg, obs_space, act_space, frame_stack=frame_stack, device=device)
+    for value in vars(agent).values():  # every network the agent holds, targets included
+        if isinstance(value, torch.nn.Module):
+            set_precision(value, cfg.precision)
+    return agent
