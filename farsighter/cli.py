@@ -27,9 +27,13 @@ commands:
             farsighter robotics --env Walker2d-v5 --steps 30000 --seeds 1 2 3 [--quick]
   explore   the exploration suite (chain, MiniGrid, MountainCar at growing sizes):
             farsighter explore [--quick] [--families chain doorkey] [--sizes 5 10] [--out DIR]
+  k-study   the sweep over k (Fig. 4) with adaptive k, on the bridge maze or any discrete task:
+            farsighter k-study [--quick] [--envs farsighter/BridgeMaze-v0 CartPole-v1] [--out DIR]
   atari     the Atari study (Fig. 2, Table 2), on ALE games or MinAtar:
             farsighter atari --games Breakout Pong --steps 100000 [--quick]
             farsighter atari --games minatar --steps 200000 --seeds 1 2
+  sweep     run a sweep file (grid of agents x envs x seeds x any field), locally or on Ray:
+            farsighter sweep benchmarks/sweeps/k-study.toml [--ray [--address ADDR]]
   train     train an agent:   farsighter train --algo farsighter --env CartPole-v1 [--help]
             continue a run:   farsighter train --run-dir DIR --resume [--total-steps N]
   eval      evaluate a run:   farsighter eval RUN_DIR [--episodes 10]
@@ -204,6 +208,18 @@ def cmd_explore(argv: Sequence[str]) -> int:
     return explore_main(argv)
 
 
+def cmd_k_study(argv: Sequence[str]) -> int:
+    from farsighter.studies.kstudy import main as k_study_main
+
+    return k_study_main(argv)
+
+
+def cmd_sweep(argv: Sequence[str]) -> int:
+    from farsighter.sweep.run import main as sweep_main
+
+    return sweep_main(argv)
+
+
 def cmd_atari(argv: Sequence[str]) -> int:
     from farsighter.studies.atari import main as atari_main
 
@@ -214,7 +230,9 @@ COMMANDS: dict[str, Callable[[Sequence[str]], int]] = {
     "maze": cmd_maze,
     "robotics": cmd_robotics,
     "explore": cmd_explore,
+    "k-study": cmd_k_study,
     "atari": cmd_atari,
+    "sweep": cmd_sweep,
     "train": cmd_train,
     "eval": cmd_eval,
     "plot": cmd_plot,

@@ -52,6 +52,11 @@ RESUMABLE_FIELDS = {
 }
 
 
+def slug(label: str) -> str:
+    """A label as a directory name: ``"Farsighter (k=10)"`` -> ``farsighter-k-10``."""
+    return "".join(c if c.isalnum() else "-" for c in label.lower()).strip("-").replace("--", "-")
+
+
 def prepare_run_dir(cfg: Config) -> Path:
     """Create (or reopen with ``resume``) the run directory; never overwrite unless asked.
 

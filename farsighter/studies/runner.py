@@ -13,12 +13,10 @@ from __future__ import annotations
 
 import dataclasses
 import json
-import os
 import shutil
 import time
 import warnings
-from collections.abc import Callable, Iterable, Iterator, MutableMapping, Sequence
-from concurrent.futures import FIRST_COMPLETED, ProcessPoolExecutor, wait
+from collections.abc import Callable, Iterable, Iterator, Sequence
 from contextlib import contextmanager
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -29,6 +27,8 @@ import tyro
 
 from farsighter.config import Config, make_config, validate
 from farsighter.errors import ConfigError, FarsighterError
+from farsighter.rundir import slug
+from farsighter.sweep.engine import Backend, Progress, execute
 
 Runs = dict[str, list[dict[str, Any]]]
 """Per agent label, one dict per finished run: ``"seed"``, ``"steps"`` (its budget), ``"task"``
@@ -45,11 +45,6 @@ class Agent:
     label: str
     algo: str
     overrides: dict[str, Any] = field(default_factory=dict)
-
-
-def slug(label: str) -> str:
-    """A label as a directory name: ``"Farsighter (k=10)"`` -> ``farsighter-k-10``."""
-    return "".join(c if c.isalnum() else "-" for c in label.lower()).strip("-").replace("--", "-")
 
 
 @dataclass(frozen=True)
@@ -130,6 +125,12 @@ class StudyArgs:
     """Delete the study directory (--out) first."""
     progress: bool = True
     """Show a progress bar over all runs."""
+    ray: tyro.conf.FlagCreatePairsOff[bool] = False
+    """Run the runs as Ray tasks (a local Ray, or the cluster of --address)."""
+    address: Annotated[str | None, _flag("ADDR", "(default: start a local Ray)")] = None
+    """Ray cluster to join with --ray (host:6379 or ray://host:10001)."""
+    retries: Annotated[int, tyro.conf.arg(metavar="N")] = 2
+    """Restarts of a run whose worker died or raised (a study's run restarts afresh)."""
 
 
 @dataclass(frozen=True)
@@ -206,15 +207,25 @@ def main(study: Study, argv: Sequence[str]) -> int:
         return redraw(study, Path(args.plot_only))
     settings = settings_from(study, args)
     check(study, settings)
+    backend = backend_of(args, settings.workers)
     out = out_dir(study, settings, args)
     if args.overwrite and out.exists():
         shutil.rmtree(out)
     t0 = time.perf_counter()
-    run_study(study, settings, out, args.progress)
+    run_study(study, settings, out, args.progress, backend)
     print(f"{study.kind} study done in {time.perf_counter() - t0:.0f} s")
     print(f"report: {out / 'report.md'}")
     print(f"figures: {out / 'figures'}")
     return 0
+
+
+def backend_of(args: StudyArgs, workers: int) -> Backend:
+    """Where the runs go: --workers, --retries, --ray, --address (checked: one line, exit 2)."""
+    if args.address is not None and not args.ray:
+        raise FarsighterError("--address joins a Ray cluster and needs --ray")
+    if args.retries < 0:
+        raise FarsighterError(f"--retries must be >= 0 (got {args.retries})")
+    return Backend(workers=workers, retries=args.retries, ray=args.ray, address=args.address)
 
 
 def parse(study: Study, argv: Sequence[str]) -> StudyArgs:
@@ -250,7 +261,7 @@ def _alone(args: StudyArgs) -> None:
     others = [
         "--" + f.name.replace("_", "-")
         for f in dataclasses.fields(args)
-        if f.name not in ("plot_only", "progress") and getattr(args, f.name) != f.default
+        if f.name not in ("plot_only", "progress", "retries") and getattr(args, f.name) != f.default
     ]
     if others:
         raise FarsighterError(
@@ -311,15 +322,22 @@ def check(study: Study, settings: Settings) -> None:
             raise ConfigError(f"{study.kind} agent '{job.label}'{task}: {exc}") from None
 
 
-def run_study(study: Study, settings: Any, out: Path, show_progress: bool = True) -> Path:
-    """Run (or resume) every agent x seed (x task), then write the study's outputs."""
+def run_study(
+    study: Study,
+    settings: Any,
+    out: Path,
+    show_progress: bool = True,
+    backend: Backend | None = None,
+) -> Path:
+    """Run (or resume) every agent x seed (x task) on ``backend`` (default: ``settings.workers``
+    local processes), then write the study's outputs."""
     todo = _prepare(study, settings, out)
     if todo:
         execute(
             _run,
             [(study, settings, job, str(job.run_dir(out))) for job in todo],
             steps=[job.steps for job in todo],
-            workers=settings.workers or os.cpu_count() or 1,
+            backend=backend or Backend(workers=settings.workers),
             desc=f"{study.kind} study",
             show_progress=show_progress,
             done_before=sum(job.steps for job in study.grid(settings)) - sum(j.steps for j in todo),
@@ -357,85 +375,15 @@ def _finished(study: Study, run_dir: Path) -> bool:
     return all((run_dir / name).exists() for name in study.finished)
 
 
-class Progress:
-    """Read-only callback: tells the parent process how far a run is (-1 when done)."""
-
-    def __init__(self, progress: MutableMapping[str, int], key: str, every: int = 500) -> None:
-        self.progress, self.key, self.every, self.next = progress, key, every, 0
-
-    def on_step(self, global_step: int, info: dict[str, Any], agent: Any) -> None:
-        if global_step >= self.next:
-            self.next = global_step + self.every
-            self.progress[self.key] = global_step
-
-    def on_finish(self, run_dir: Path, agent: Any) -> None:
-        self.progress[self.key] = -1
-
-
 def _run(study: Study, settings: Any, job: Job, run_dir: str, progress: Any) -> str:
-    """One job (in a worker process): train the run with the study's callback."""
+    """One job (in a worker process): train the run with the study's callback. A restarted job
+    starts afresh (``overwrite``): the callbacks' state is not checkpointed."""
     from farsighter.train import train
 
     cfg = study.config(settings, job, Path(run_dir))
     callbacks = [study.callback(settings)] if study.callback else []
     train(cfg, callbacks=[*callbacks, Progress(progress, run_dir)])
     return run_dir
-
-
-def execute(
-    fn: Callable[..., Any],
-    jobs: Sequence[tuple[Any, ...]],
-    *,
-    steps: Sequence[int],
-    workers: int,
-    desc: str,
-    show_progress: bool,
-    done_before: int = 0,
-) -> None:
-    """Call ``fn(*job, progress)`` for every job, where ``progress`` maps a run key to its current
-    step (a run sets it, and -1 when done); job i is ``steps[i]`` steps long. ``workers == 1``
-    runs in this process (no interpreter start-up); otherwise fresh spawned interpreters, so
-    nothing is shared by accident. A worker's error is re-raised here."""
-    import multiprocessing as mp
-
-    from tqdm import tqdm
-
-    total = done_before + sum(steps)
-    bar = tqdm(
-        total=total,
-        initial=done_before,
-        unit="step",
-        disable=not show_progress,
-        dynamic_ncols=True,
-        desc=f"{desc} ({len(jobs)} runs, {workers} workers)",
-    )
-    try:
-        if workers == 1:
-            local: dict[str, int] = {}
-            for job, n in zip(jobs, steps, strict=True):
-                fn(*job, local)
-                bar.update(n)
-            return
-        ctx = mp.get_context("spawn")
-        with ctx.Manager() as manager:
-            shared = manager.dict()
-            finished = 0
-            with ProcessPoolExecutor(workers, mp_context=ctx) as pool:
-                length = {
-                    pool.submit(fn, *job, shared): n for job, n in zip(jobs, steps, strict=True)
-                }
-                pending = set(length)
-                while pending:
-                    done, pending = wait(pending, timeout=1.0, return_when=FIRST_COMPLETED)
-                    for fut in done:
-                        fut.result()
-                        finished += length[fut]
-                    running = sum(v for v in shared.values() if v > 0)
-                    bar.n = done_before + finished + running
-                    bar.refresh()
-        bar.n = total
-    finally:
-        bar.close()
 
 
 # ------------------------------------------------------------------------------------------------

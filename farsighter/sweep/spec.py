@@ -92,7 +92,7 @@ from typing import Any, Literal, NoReturn
 from farsighter import algorithms
 from farsighter.config import Config, make_config, validate
 from farsighter.errors import ConfigError, FarsighterError
-from farsighter.studies.runner import slug
+from farsighter.rundir import slug
 
 SECTIONS: tuple[str, ...] = ("name", "description", "grid", "set", "agents", "resources")
 """The accepted top-level keys of a sweep file."""

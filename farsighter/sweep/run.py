@@ -1,0 +1,358 @@
+"""``farsighter sweep SPEC``: run a sweep file's trials and aggregate them.
+
+The sweep directory (``--out``, default ``sweeps/<name>``) holds::
+
+    sweep.json         the file's path and text, and the trial names (a rerun must match them)
+    trials/<name>/     one run directory per trial (config, metrics, eval.csv, checkpoints)
+    trials/<name>.attempts.log   one line per start of the trial (time, host, pid, fresh|resume)
+    results.csv        one row per trial: agent, env, seed, swept values, final and best
+                       evaluation return, steps, attempts
+    aggregate/         rliable statistics across environments (farsighter.aggregate)
+    figures/curves.png evaluation return against steps, per environment
+    report.md          what ran, where, how long, how many restarts, and the tables
+
+A rerun of the same sweep skips finished trials and resumes unfinished ones from their last
+checkpoint; so does a trial that the engine restarts after its worker died.
+"""
+
+from __future__ import annotations
+
+import csv
+import json
+import os
+import shutil
+import socket
+import time
+from collections.abc import Sequence
+from dataclasses import dataclass, replace
+from pathlib import Path
+from typing import Annotated, Any
+
+import numpy as np
+import tyro
+
+from farsighter.errors import FarsighterError
+from farsighter.rundir import CHECKPOINT_FILE, EVAL_FILE, SUMMARY_FILE
+from farsighter.sweep.engine import Backend, Progress, execute
+from farsighter.sweep.spec import SweepError, SweepSpec, Trial, load_spec
+
+
+@dataclass(frozen=True)
+class SweepArgs:
+    """farsighter sweep SPEC: run every trial of a sweep file (TOML or YAML; format:
+    farsighter.sweep.spec), locally or on Ray, then aggregate the results."""
+
+    spec: tyro.conf.Positional[str]
+    """The sweep file."""
+    out: Annotated[str | None, tyro.conf.arg(metavar="DIR")] = None
+    """Sweep directory (default: sweeps/<name>)."""
+    ray: tyro.conf.FlagCreatePairsOff[bool] = False
+    """Run the trials as Ray tasks (a local Ray, or the cluster of --address)."""
+    address: Annotated[str | None, tyro.conf.arg(metavar="ADDR")] = None
+    """Ray cluster to join with --ray (host:6379 or ray://host:10001)."""
+    workers: Annotated[int | None, tyro.conf.arg(metavar="N")] = None
+    """Trials at once (default: the file's resources.max_concurrent; 0: one per core locally, as
+    resources allow on Ray; 1 without --ray: one after another in this process)."""
+    overwrite: tyro.conf.FlagCreatePairsOff[bool] = False
+    """Delete the sweep directory first."""
+    dry_run: tyro.conf.FlagCreatePairsOff[bool] = False
+    """List the trials and what is left to do, run nothing."""
+    progress: bool = True
+    """Show a progress bar over all trials."""
+
+
+def main(argv: Sequence[str]) -> int:
+    args = tyro.cli(SweepArgs, args=list(argv), prog="farsighter sweep")
+    spec = load_spec(args.spec)
+    out = Path(args.out) if args.out else spec.default_dir
+    if args.address is not None and not args.ray:
+        raise FarsighterError("--address joins a Ray cluster and needs --ray")
+    if args.workers is not None and args.workers < 0:
+        raise FarsighterError(f"--workers must be >= 0 (got {args.workers})")
+    res = spec.resources
+    backend = Backend(
+        workers=res.max_concurrent if args.workers is None else args.workers,
+        retries=res.retries,
+        ray=args.ray,
+        address=args.address,
+        cpus=res.cpus,
+        gpus=res.gpus,
+    )
+    if args.dry_run:
+        todo = [t for t in spec.trials if not finished(out / "trials" / t.name)]
+        for trial in spec.trials:
+            state = "to run" if trial in todo else "finished"
+            print(f"{trial.name}  ({trial.algo}, {_steps(trial):,} steps)  {state}")
+        print(f"{len(spec.trials)} trials, {len(todo)} to run, in {out}")
+        return 0
+    if args.overwrite and out.exists():
+        shutil.rmtree(out)
+    t0 = time.perf_counter()
+    run_sweep(spec, out, backend, show_progress=args.progress)
+    print(f"sweep {spec.name} done in {time.perf_counter() - t0:.0f} s")
+    print(f"report: {out / 'report.md'}")
+    return 0
+
+
+def _steps(trial: Trial) -> int:
+    return trial.config("").total_steps
+
+
+def finished(run_dir: Path) -> bool:
+    """A trial is finished when its run wrote its summary at the end of its budget."""
+    return (run_dir / SUMMARY_FILE).exists()
+
+
+def run_sweep(
+    spec: SweepSpec, out: Path, backend: Backend, show_progress: bool = True
+) -> dict[str, Any]:
+    """Run every unfinished trial of ``spec`` on ``backend`` (finished ones are skipped,
+    unfinished ones resume from their checkpoints), then write the results; returns what the
+    report says of the run (wall time, attempts)."""
+    _prepare(spec, out)
+    todo = [t for t in spec.trials if not finished(out / "trials" / t.name)]
+    steps = [_steps(t) for t in todo]
+    t0 = time.perf_counter()
+    if todo:
+        execute(
+            run_trial,
+            [(trial, str(out / "trials" / trial.name)) for trial in todo],
+            steps=steps,
+            backend=backend,
+            desc=f"sweep {spec.name}",
+            show_progress=show_progress,
+            done_before=sum(_steps(t) for t in spec.trials) - sum(steps),
+        )
+    run = {
+        "backend": backend.describe(),
+        "wall_seconds": time.perf_counter() - t0,
+        "trials_run": len(todo),
+    }
+    write_outputs(spec, out, run)
+    return run
+
+
+def _prepare(spec: SweepSpec, out: Path) -> None:
+    """Keep the sweep's file and trial list; a directory of another sweep is refused."""
+    out.mkdir(parents=True, exist_ok=True)
+    saved = out / "sweep.json"
+    names = [t.name for t in spec.trials]
+    if saved.exists():
+        previous = json.loads(saved.read_text())
+        if previous.get("trials") != names:
+            raise SweepError(
+                f"{out} holds another sweep ({previous.get('name')!r}, "
+                f"{len(previous.get('trials', []))} trials); use another --out or --overwrite"
+            )
+    text = Path(spec.source).read_text() if Path(spec.source).is_file() else ""
+    record = {"name": spec.name, "source": spec.source, "text": text, "trials": names}
+    saved.write_text(json.dumps(record, indent=2) + "\n")
+
+
+def run_trial(trial: Trial, run_dir: str, progress: Any) -> str:
+    """One trial (in a worker): resume from its checkpoint if it has one, else start afresh
+    (a run killed before its first checkpoint leaves nothing worth keeping)."""
+    from farsighter.train import train
+
+    path = Path(run_dir)
+    resume = (path / CHECKPOINT_FILE).exists()
+    attempts_log(path).parent.mkdir(parents=True, exist_ok=True)
+    with open(attempts_log(path), "a") as log:
+        how = "resume" if resume else "fresh"
+        log.write(f"{time.time():.3f} {socket.gethostname()} pid {os.getpid()} {how}\n")
+    cfg = replace(trial.config(path), resume=resume, overwrite=not resume)
+    train(cfg, callbacks=[Progress(progress, run_dir)])
+    return run_dir
+
+
+def attempts_log(run_dir: Path) -> Path:
+    """``<run dir>.attempts.log`` beside the run directory (a fresh start replaces the run
+    directory, not its log): one line per start of the trial (time, host, pid, fresh|resume)."""
+    return run_dir.with_name(run_dir.name + ".attempts.log")
+
+
+def attempts(run_dir: Path) -> int:
+    """How many times the trial was started."""
+    file = attempts_log(run_dir)
+    return len(file.read_text().splitlines()) if file.exists() else 0
+
+
+# ------------------------------------------------------------------------------------------------
+# Outputs
+# ------------------------------------------------------------------------------------------------
+
+
+def variant(trial: Trial) -> str:
+    """The trial's agent and swept values: what the aggregate compares (``farsighter k=10``)."""
+    return " ".join([trial.agent, *(f"{k}={v}" for k, v in trial.swept)])
+
+
+def results(spec: SweepSpec, out: Path) -> list[dict[str, Any]]:
+    """One row per finished trial, from its summary.json."""
+    rows = []
+    for trial in spec.trials:
+        path = out / "trials" / trial.name
+        if not finished(path):
+            continue
+        summary = json.loads((path / SUMMARY_FILE).read_text())
+        rows.append(
+            {
+                "trial": trial.name,
+                "agent": trial.agent,
+                "variant": variant(trial),
+                "env": trial.env,
+                "seed": trial.seed,
+                **{k: v for k, v in trial.swept},
+                "steps": summary["global_step"],
+                "final_eval_return": summary["final_eval_return"],
+                "best_eval_return": summary["best_eval_return"],
+                "attempts": attempts(path),
+            }
+        )
+    return rows
+
+
+def normalization(envs: Sequence[str]) -> str:
+    """human (every env an ALE game with reference scores), raw (one env), else minmax."""
+    from farsighter.envs.atari_scores import baseline
+
+    try:
+        for env in envs:
+            baseline(env)
+        return "human"
+    except FarsighterError:
+        return "raw" if len(envs) == 1 else "minmax"
+
+
+def score_table(rows: list[dict[str, Any]], how: str) -> tuple[dict[str, np.ndarray], list[str]]:
+    """Per variant a (seeds x envs) array of final evaluation returns, normalised: ``human``
+    (Atari: random 0, human 1), ``minmax`` (per env: the lowest run of any variant 0, the highest
+    1), or ``raw``. Seeds missing for a variant on an env are dropped from all its envs."""
+    from farsighter.envs.atari_scores import human_normalized
+
+    envs = sorted({r["env"] for r in rows})
+    score = {(r["variant"], r["env"], r["seed"]): float(r["final_eval_return"]) for r in rows}
+    if how == "human":
+        score = {key: human_normalized(key[1], v) for key, v in score.items()}
+    elif how == "minmax":
+        for env in envs:
+            values = [v for (_, e, _), v in score.items() if e == env]
+            lo, hi = min(values), max(values)
+            for key in [k for k in score if k[1] == env]:
+                score[key] = (score[key] - lo) / (hi - lo) if hi > lo else 0.0
+    table = {}
+    for name in dict.fromkeys(r["variant"] for r in rows):
+        seeds = sorted(
+            {s for (v, _, s) in score if v == name}
+            & set.intersection(
+                *({s for (v, e, s) in score if v == name and e == env} for env in envs)
+            )
+        )
+        if seeds:
+            table[name] = np.array([[score[(name, env, s)] for env in envs] for s in seeds])
+    return table, envs
+
+
+def write_outputs(spec: SweepSpec, out: Path, run: dict[str, Any] | None = None) -> None:
+    rows = results(spec, out)
+    if not rows:
+        return
+    keys = list(dict.fromkeys(k for row in rows for k in row))
+    with open(out / "results.csv", "w", newline="") as f:
+        writer = csv.DictWriter(f, fieldnames=keys)
+        writer.writeheader()
+        writer.writerows(rows)
+    how = normalization(sorted({r["env"] for r in rows}))
+    table, envs = score_table(rows, how)
+    agg_md = ""
+    if table:
+        from farsighter import aggregate
+
+        paths = aggregate.write_outputs(
+            out / "aggregate", table, envs, normalized_name=_NORM_TEXT[how]
+        )
+        agg_md = paths["aggregate_md"].read_text()
+    (out / "figures").mkdir(exist_ok=True)
+    _plot_curves(spec, out, out / "figures" / "curves.png")
+    _report(spec, out, rows, agg_md, how, run)
+
+
+_NORM_TEXT = {
+    "human": "human-normalised score (random 0, human 1)",
+    "minmax": "min-max normalised score per environment (lowest run 0, highest 1)",
+    "raw": "raw final evaluation return",
+}
+
+
+def _plot_curves(spec: SweepSpec, out: Path, file: Path) -> None:
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    from farsighter.plots import read_csv
+
+    envs = list(dict.fromkeys(t.env for t in spec.trials))
+    fig, axes = plt.subplots(1, len(envs), figsize=(5 * len(envs), 3.6), squeeze=False)
+    for ax, env in zip(axes[0], envs, strict=True):
+        curves: dict[str, list[tuple[np.ndarray, np.ndarray]]] = {}
+        for trial in spec.trials:
+            path = out / "trials" / trial.name / EVAL_FILE
+            if trial.env != env or not path.exists():
+                continue
+            data = read_csv(path)
+            if len(data.get("global_step", [])):
+                curves.setdefault(variant(trial), []).append(
+                    (data["global_step"], data["eval_return_mean"])
+                )
+        for name, runs in curves.items():
+            n = min(len(x) for x, _ in runs)
+            x, ys = runs[0][0][:n], np.stack([y[:n] for _, y in runs])
+            mean, std = ys.mean(0), ys.std(0)
+            ax.plot(x, mean, label=name)
+            ax.fill_between(x, mean - std, mean + std, alpha=0.2)
+        ax.set_title(env)
+        ax.set_xlabel("environment steps")
+        ax.set_ylabel("evaluation return")
+        ax.legend(fontsize=7)
+    fig.tight_layout()
+    fig.savefig(file, dpi=110)
+    plt.close(fig)
+
+
+def _report(
+    spec: SweepSpec,
+    out: Path,
+    rows: list[dict[str, Any]],
+    agg_md: str,
+    how: str,
+    run: dict[str, Any] | None,
+) -> None:
+    restarts = sum(max(r["attempts"] - 1, 0) for r in rows)
+    lines = [
+        f"# Sweep {spec.name}",
+        "",
+        spec.description,
+        "",
+        f"- Sweep file: `{spec.source}`; {len(spec.trials)} trials, {len(rows)} finished.",
+        f"- Restarts (a trial started again after its worker died or raised): {restarts}.",
+    ]
+    if run:
+        lines.append(
+            f"- This invocation: {run['trials_run']} trials run on {run['backend']} in "
+            f"{run['wall_seconds']:.0f} s."
+        )
+    lines += ["", "## Final evaluation return per environment (mean ± std over seeds)", ""]
+    groups: dict[tuple[str, str], list[float]] = {}
+    for r in rows:
+        groups.setdefault((r["variant"], r["env"]), []).append(float(r["final_eval_return"]))
+    lines += ["| agent | environment | seeds | final return |", "|---|---|---|---|"]
+    for (name, env), values in groups.items():
+        v = np.array(values)
+        sd = v.std(ddof=1) if len(v) > 1 else 0.0
+        lines.append(f"| {name} | {env} | {len(v)} | {v.mean():.2f} ± {sd:.2f} |")
+    if agg_md:
+        lines += ["", f"## Across environments ({_NORM_TEXT[how]})", "", agg_md.strip()]
+        lines += ["", "![aggregate](aggregate/figures/aggregate.png)"]
+    lines += ["", "![curves](figures/curves.png)", ""]
+    (out / "report.md").write_text("\n".join(lines))
