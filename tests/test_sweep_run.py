@@ -148,3 +148,17 @@ def test_bad_sweep_files_are_one_line_and_exit_2(
     err = capsys.readouterr().err.strip()
     assert err.startswith("farsighter: error:") and message in err and "\n" not in err
     assert not (tmp_path / "o").exists()
+
+
+SWEEPS = sorted((Path(__file__).resolve().parent.parent / "benchmarks" / "sweeps").glob("*.toml"))
+
+
+@pytest.mark.parametrize("file", SWEEPS, ids=[f.stem for f in SWEEPS])
+def test_the_shipped_sweep_files_expand_into_valid_trials(file: Path) -> None:
+    spec = load_spec(file)  # every trial's config is built and validated
+    assert spec.trials and spec.description
+
+
+def test_a_study_refuses_address_without_ray(capsys: pytest.CaptureFixture[str]) -> None:
+    assert cli_main(["maze", "--quick", "--address", "localhost:6379"]) == 2
+    assert "--address joins a Ray cluster and needs --ray" in capsys.readouterr().err
