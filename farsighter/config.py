@@ -494,6 +494,35 @@ PRESETS: dict[str, Preset] = {
             },
         ),
         Preset(
+            "atari100k",
+            "Atari 100k (100k agent steps = 400k frames, the data-efficient regime of Kaiser et "
+            "al. 2020): Table 1's Atari column for the learning, its schedules shrunk to the "
+            "budget (learning from step 1,600, target copied every 2,000 steps, epsilon 1 to "
+            "0.01 over 2,000 steps, a 100k buffer that holds the whole run) and the general "
+            "preset's posterior for the Bayesian agents; the Atari evaluation protocol.",
+            "Farsighter paper Table 1 (Atari column: RMSProp 0.0025, update every 4 steps, "
+            "batch 32); learning start, target period and epsilon schedule of data-efficient "
+            "Rainbow (van Hasselt et al. 2019, Dopamine's DER config); evaluation as the atari "
+            "preset; posterior as the general preset",
+            {
+                **_CONTROL,
+                "target_update_every": 2_000,
+                "learning_starts": 1_600,
+                "buffer_size": 100_000,
+                "eps_end": 0.01,
+                "eps_decay_steps": 3_600,  # 2,000 steps of decay after the 1,600-step start
+                "eval_epsilon": 0.001,
+                "eval_max_steps": 27_000,
+                "eval_every": 25_000,
+                "eval_episodes": 10,
+                "checkpoint_every": 25_000,
+                "save_replay": False,
+                "log_every": 5_000,
+                **_FRESH_POSTERIOR,
+            },
+            per_algo=_FRESH_PER_ALGO,
+        ),
+        Preset(
             "minatar",
             "MinAtar (what `auto` gives a MinAtar id): Young & Tian's DQN settings for the "
             "learning (one update per step, 100k buffer, target copied every 1k steps, epsilon "

@@ -55,6 +55,7 @@ class StudyConfig:
     eval_episodes: int = 10
     workers: int = 0  # 0: one per core
     agents: tuple[str, ...] = ("DDQN", "BDQN", "Farsighter", "OB2I")
+    preset: str = "auto"  # auto: atari for ALE games, minatar for MinAtar
 
 
 QUICK = StudyConfig(
@@ -84,6 +85,9 @@ class Args(StudyArgs):
     """Steps between greedy evaluations (at most half of --steps)."""
     eval_episodes: Annotated[int | None, _hint("N")] = None
     """Episodes of each evaluation."""
+    preset: Annotated[str | None, _hint("NAME")] = None
+    """Preset of every run: auto (atari for ALE games, minatar for MinAtar), atari100k (the
+    100k-step regime: schedules shrunk to the budget), or any of `farsighter presets`."""
 
 
 def expand_games(names: Sequence[str]) -> tuple[str, ...]:
@@ -129,11 +133,12 @@ def run_config(agent: Agent, study: StudyConfig, seed: int, run_dir: Path, task:
     memory is not reserved for frames that never come), and the final checkpoint holds no
     replay."""
     env, steps = task
-    base = runner.run_config(agent, env, "auto", seed, steps, run_dir)
+    preset = study.preset
+    base = runner.run_config(agent, env, preset, seed, steps, run_dir)
     return runner.run_config(
         agent,
         env,
-        "auto",
+        preset,
         seed,
         steps,
         run_dir,
@@ -361,10 +366,11 @@ def _report(
         f"{list(study['seeds'])}; {study['steps']:,} agent steps per run"
         + (f" ({4 * study['steps']:,} frames on ALE games)" if ale else "")
         + f"; greedy evaluation every {study['eval_every']:,} steps over "
-        f"{study['eval_episodes']} episodes. Every agent runs with the library's `auto` preset "
-        "(`atari` for ALE games: Table 1's Atari column and Dopamine's protocol; `minatar` for "
-        "MinAtar: Young & Tian's DQN settings with the general preset's posterior; "
-        "`farsighter presets`).",
+        f"{study['eval_episodes']} episodes. Every agent runs with the library's "
+        f"`{study.get('preset', 'auto')}` preset (`auto` is `atari` for ALE games: Table 1's "
+        "Atari column and Dopamine's protocol, and `minatar` for MinAtar: Young & Tian's DQN "
+        "settings with the general preset's posterior; `atari100k` shrinks the Atari "
+        "schedules to a 100k-step budget; `farsighter presets`).",
         "",
         "Score: the mean return of the last evaluation, with unclipped rewards over whole games "
         "(no life-loss terminals); human-normalised score (HNS) = (score - random) / (human - "
