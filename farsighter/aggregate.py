@@ -10,7 +10,7 @@ of improvement of one agent over another, and performance profiles (score distri
 All functions are pure: the same inputs and ``seed`` give the same output. rliable 1.2 draws its
 bootstrap indices from NumPy's *global* random state and ignores its ``random_state`` argument, so
 each call seeds the global state for its duration and restores it afterwards (not thread-safe).
-rliable is an optional dependency (the ``ray`` extra) and is imported on first use.
+rliable is an optional dependency (the ``stats`` extra) and is imported on first use.
 """
 
 from __future__ import annotations
@@ -61,6 +61,16 @@ def _global_seed(seed: int) -> Iterator[None]:
         yield
     finally:
         np.random.set_state(state)  # noqa: NPY002
+
+
+def minmax_normalized(scores: Mapping[str, Any]) -> Scores:
+    """Scores rescaled per task so that the lowest run of any agent is 0 and the highest 1 (a
+    task where every run scored the same is 0): for tasks without reference scores."""
+    checked = validate_scores(scores)
+    stacked = np.concatenate(list(checked.values()))  # (all runs, tasks)
+    lo, hi = stacked.min(axis=0), stacked.max(axis=0)
+    span = np.where(hi > lo, hi - lo, 1.0)
+    return {agent: np.where(hi > lo, (x - lo) / span, 0.0) for agent, x in checked.items()}
 
 
 def validate_scores(scores: Mapping[str, Any], tasks: Sequence[str] | None = None) -> Scores:

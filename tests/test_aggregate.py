@@ -192,3 +192,13 @@ def test_write_outputs_one_agent_one_run_one_task(tmp_path: Path) -> None:
     assert "probability_of_improvement" not in paths
     assert not (tmp_path / "probability_of_improvement.csv").exists()
     assert (tmp_path / "figures" / "profiles.png").stat().st_size > 0
+
+
+def test_minmax_normalization_per_task_over_all_agents() -> None:
+    from farsighter.aggregate import minmax_normalized
+
+    scores = {"a": np.array([[0.0, 5.0], [10.0, 5.0]]), "b": np.array([[5.0, 5.0]])}
+    out = minmax_normalized(scores)
+    # task 0 spans 0..10 over both agents; task 1 is constant (every run 5): 0
+    np.testing.assert_allclose(out["a"], [[0.0, 0.0], [1.0, 0.0]])
+    np.testing.assert_allclose(out["b"], [[0.5, 0.0]])

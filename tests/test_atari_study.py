@@ -24,6 +24,7 @@ from farsighter.studies.atari import (
     env_id,
     expand_games,
     per_game,
+    rliable_scores,
     run_config,
     tasks,
 )
@@ -113,6 +114,17 @@ def test_per_game_rows_normalise_and_aggregate() -> None:
     found = {(game, verdict) for game, _, verdict in claims(rows)}
     # two seeds each: Farsighter's 59.3, 59.3 against DDQN's 1.7, 30.5 holds; one seed is undecided
     assert found == {("Breakout", "holds"), ("MinAtar/Breakout", "undecided")}
+    # rliable's input: a MinAtar game among them has no human score, so min-max per game over
+    # both agents' runs (seeds beyond the fewest any agent has on a game are dropped: 1 here)
+    table, games, name = rliable_scores(rows)
+    assert games == ["Breakout", "MinAtar/Breakout"] and name.startswith("min-max")
+    np.testing.assert_allclose(table["DDQN"], [[0.0, 1.0]])
+    np.testing.assert_allclose(table["Farsighter"], [[1.0, 0.0]])
+    ale_only = [r for r in rows if r["game"] == "Breakout"]
+    table, _, name = rliable_scores(ale_only)
+    assert name.startswith("human")
+    np.testing.assert_allclose(table["DDQN"], [[0.0], [1.0]])
+    np.testing.assert_allclose(table["Farsighter"], [[2.0], [2.0]])
 
 
 BAD = [
@@ -147,6 +159,8 @@ def test_tiny_minatar_study_end_to_end_and_plot_only(tmp_path: Path) -> None:
     assert (run_dir / "summary.json").exists()
     for name in ("report.md", "table.csv", "table.md", "aggregate.csv", "study.json"):
         assert (out / name).exists(), name
+    for name in ("aggregate.csv", "probability_of_improvement.csv", "figures/profiles.png"):
+        assert (out / "rliable" / name).exists(), name
     _, runs = load_runs(STUDY, out)
     assert sorted(runs) == ["DDQN", "Farsighter"]
     assert [len(r["eval"]["global_step"]) for r in runs["DDQN"]] == [2, 2]

@@ -300,7 +300,45 @@ def write_outputs(out: Path, study: dict[str, Any], runs: Runs) -> None:
         writer.writeheader()
         writer.writerows(agg)
     (out / "table.md").write_text(_table(rows) + "\n" + _aggregate_table(agg))
-    _report(study, rows, agg, out)
+    rl = _rliable(rows, out / "rliable")
+    _report(study, rows, agg, out, rl)
+
+
+def rliable_scores(rows: list[dict[str, Any]]) -> tuple[dict[str, np.ndarray], list[str], str]:
+    """Per agent a (seeds x games) array for rliable: human-normalised when every game is an
+    ALE game, else min-max normalised per game over all agents' runs (MinAtar has no human
+    reference); agents that lack a game, and seeds beyond the fewest any agent has, are left
+    out. Returns the scores, the games and what the normalisation was."""
+    from farsighter.aggregate import minmax_normalized
+
+    games = list(dict.fromkeys(r["game"] for r in rows))
+    human = all(np.isfinite(r["hns_mean"]) for r in rows)
+    cells = {(r["agent"], r["game"]): r["per_seed"]["hns" if human else "score"] for r in rows}
+    agents = [
+        a for a in dict.fromkeys(r["agent"] for r in rows) if all((a, g) in cells for g in games)
+    ]
+    if not agents:
+        return {}, games, ""
+    n = min(len(cells[(a, g)]) for a in agents for g in games)
+    table = {a: np.array([cells[(a, g)][:n] for g in games], dtype=float).T for a in agents}
+    if human:
+        return table, games, "human-normalised score (random 0, human 1)"
+    return minmax_normalized(table), games, "min-max normalised per game (lowest run 0, highest 1)"
+
+
+def _rliable(rows: list[dict[str, Any]], out: Path) -> str:
+    """rliable's aggregates (farsighter.aggregate) under ``out``; their Markdown table, or ""
+    when the runs cannot be stacked or a score is missing."""
+    from farsighter import aggregate
+
+    table, games, name = rliable_scores(rows)
+    if not table or any(not np.isfinite(x).all() for x in table.values()):
+        return ""
+    pairs = (
+        [("Farsighter", a) for a in table if a != "Farsighter"] if "Farsighter" in table else None
+    )
+    paths = aggregate.write_outputs(out, table, games, normalized_name=name, pairs=pairs)
+    return paths["aggregate_md"].read_text()
 
 
 def _table(rows: list[dict[str, Any]]) -> str:
@@ -355,7 +393,11 @@ def _plot(study: dict[str, Any], runs: Runs, file: Path) -> None:
 
 
 def _report(
-    study: dict[str, Any], rows: list[dict[str, Any]], agg: list[dict[str, Any]], out: Path
+    study: dict[str, Any],
+    rows: list[dict[str, Any]],
+    agg: list[dict[str, Any]],
+    out: Path,
+    rl: str = "",
 ) -> None:
     games = list(dict.fromkeys(r["game"] for r in rows))
     ale = any(np.isfinite(r["paper"]) for r in rows)
@@ -391,6 +433,18 @@ def _report(
         "## Aggregate",
         "",
         _aggregate_table(agg),
+    ]
+    if rl:
+        lines += [
+            "Across games with rliable (interquartile mean and the rest with stratified-bootstrap "
+            "95% CIs; `rliable/` holds the CSVs, probability of improvement of Farsighter over "
+            "each agent, and the figures `rliable/figures/aggregate.png`, "
+            "`rliable/figures/profiles.png`):",
+            "",
+            rl.strip(),
+            "",
+        ]
+    lines += [
         "## Claims",
         "",
         "Per game, Farsighter against each other agent, decided by a 95% bootstrap confidence "

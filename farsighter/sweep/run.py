@@ -227,29 +227,22 @@ def normalization(envs: Sequence[str]) -> str:
 def score_table(rows: list[dict[str, Any]], how: str) -> tuple[dict[str, np.ndarray], list[str]]:
     """Per variant a (seeds x envs) array of final evaluation returns, normalised: ``human``
     (Atari: random 0, human 1), ``minmax`` (per env: the lowest run of any variant 0, the highest
-    1), or ``raw``. Seeds missing for a variant on an env are dropped from all its envs."""
+    1), or ``raw``. Only the seeds a variant finished on every env are kept."""
+    from farsighter.aggregate import minmax_normalized
     from farsighter.envs.atari_scores import human_normalized
 
     envs = sorted({r["env"] for r in rows})
     score = {(r["variant"], r["env"], r["seed"]): float(r["final_eval_return"]) for r in rows}
     if how == "human":
         score = {key: human_normalized(key[1], v) for key, v in score.items()}
-    elif how == "minmax":
-        for env in envs:
-            values = [v for (_, e, _), v in score.items() if e == env]
-            lo, hi = min(values), max(values)
-            for key in [k for k in score if k[1] == env]:
-                score[key] = (score[key] - lo) / (hi - lo) if hi > lo else 0.0
     table = {}
     for name in dict.fromkeys(r["variant"] for r in rows):
-        seeds = sorted(
-            {s for (v, _, s) in score if v == name}
-            & set.intersection(
-                *({s for (v, e, s) in score if v == name and e == env} for env in envs)
-            )
-        )
+        per_env = [{s for (v, e, s) in score if v == name and e == env} for env in envs]
+        seeds = sorted(set.intersection(*per_env))
         if seeds:
             table[name] = np.array([[score[(name, env, s)] for env in envs] for s in seeds])
+    if how == "minmax" and table:
+        table = minmax_normalized(table)
     return table, envs
 
 
