@@ -66,8 +66,20 @@ def make_replay(
 
 
 def obs_tensor(obs: np.ndarray, device: torch.device) -> torch.Tensor:
-    """Observations keep their dtype (uint8 frames cross to the device as bytes)."""
-    return torch.as_tensor(np.asarray(obs), device=device)
+    """Observations keep their dtype (uint8 frames cross to the device as bytes). To a GPU they
+    go through pinned memory with a non-blocking copy, so the host does not wait for it."""
+    return to_device(np.asarray(obs), device)
+
+
+def to_device(
+    x: np.ndarray, device: torch.device, dtype: torch.dtype | None = None
+) -> torch.Tensor:
+    """A numpy array on ``device``: as is on the CPU; through pinned memory and a non-blocking
+    copy to a GPU (the copy is ordered before any kernel that reads it on the same stream)."""
+    t = torch.as_tensor(x, dtype=dtype)
+    if torch.device(device).type != "cuda":
+        return t
+    return t.pin_memory().to(device, non_blocking=True)
 
 
 @dataclass(frozen=True)
@@ -90,13 +102,13 @@ def batch_tensors(batch: Batch, device: torch.device) -> TensorBatch:
     return TensorBatch(
         obs_B=obs_tensor(batch.obs, device),
         next_obs_B=obs_tensor(batch.next_obs, device),
-        actions_B=torch.as_tensor(
+        actions_B=to_device(
             batch.actions,
-            device=device,
+            device,
             dtype=torch.int64 if batch.actions.dtype.kind in "iu" else torch.float32,
         ),
-        returns_B=torch.as_tensor(batch.returns, device=device),
-        bootstrap_B=torch.as_tensor(batch.bootstrap, device=device),
+        returns_B=to_device(batch.returns, device),
+        bootstrap_B=to_device(batch.bootstrap, device),
     )
 
 
