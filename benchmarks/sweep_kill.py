@@ -36,8 +36,7 @@ def main() -> None:
     shutil.rmtree(out, ignore_errors=True)
     cmd = [sys.executable, "-m", "farsighter", "sweep", args.spec, "--out", str(out)]
     cmd += ["--workers", str(args.workers), "--no-progress"]
-    if not args.local:
-        cmd.append("--ray")
+    cmd.append("--local" if args.local else "--ray")
     t0 = time.perf_counter()
     proc = subprocess.Popen(cmd, cwd=REPO)
     victim, killed_pid, killed_at = None, None, None

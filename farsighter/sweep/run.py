@@ -47,7 +47,10 @@ class SweepArgs:
     out: Annotated[str | None, tyro.conf.arg(metavar="DIR")] = None
     """Sweep directory (default: sweeps/<name>)."""
     ray: tyro.conf.FlagCreatePairsOff[bool] = False
-    """Run the trials as Ray tasks (a local Ray, or the cluster of --address)."""
+    """Run the trials as Ray tasks (a local Ray, or the cluster of --address); the default
+    when Ray is installed."""
+    local: tyro.conf.FlagCreatePairsOff[bool] = False
+    """Run the trials on local worker processes even when Ray is installed."""
     address: Annotated[str | None, tyro.conf.arg(metavar="ADDR")] = None
     """Ray cluster to join with --ray (host:6379 or ray://host:10001)."""
     workers: Annotated[int | None, tyro.conf.arg(metavar="N")] = None
@@ -65,15 +68,20 @@ def main(argv: Sequence[str]) -> int:
     args = tyro.cli(SweepArgs, args=list(argv), prog="farsighter sweep")
     spec = load_spec(args.spec)
     out = Path(args.out) if args.out else spec.default_dir
-    if args.address is not None and not args.ray:
-        raise FarsighterError("--address joins a Ray cluster and needs --ray")
+    if args.ray and args.local:
+        raise FarsighterError(
+            "--ray and --local exclude each other; pass one (default: Ray when installed)"
+        )
+    if args.address is not None and args.local:
+        raise FarsighterError("--address joins a Ray cluster; it does not go with --local")
+    use_ray = args.ray or args.address is not None or (not args.local and ray_installed())
     if args.workers is not None and args.workers < 0:
         raise FarsighterError(f"--workers must be >= 0 (got {args.workers})")
     res = spec.resources
     backend = Backend(
         workers=res.max_concurrent if args.workers is None else args.workers,
         retries=res.retries,
-        ray=args.ray,
+        ray=use_ray,
         address=args.address,
         cpus=res.cpus,
         gpus=res.gpus,
@@ -83,7 +91,7 @@ def main(argv: Sequence[str]) -> int:
         for trial in spec.trials:
             state = "to run" if trial in todo else "finished"
             print(f"{trial.name}  ({trial.algo}, {_steps(trial):,} steps)  {state}")
-        print(f"{len(spec.trials)} trials, {len(todo)} to run, in {out}")
+        print(f"{len(spec.trials)} trials, {len(todo)} to run, in {out}, on {backend.describe()}")
         return 0
     if args.overwrite and out.exists():
         shutil.rmtree(out)
@@ -92,6 +100,12 @@ def main(argv: Sequence[str]) -> int:
     print(f"sweep {spec.name} done in {time.perf_counter() - t0:.0f} s")
     print(f"report: {out / 'report.md'}")
     return 0
+
+
+def ray_installed() -> bool:
+    import importlib.util
+
+    return importlib.util.find_spec("ray") is not None
 
 
 def _steps(trial: Trial) -> int:
