@@ -321,8 +321,14 @@ def _plot(
         r["agent"]: np.array([[r[f"{m}_lo"] for m in METRICS], [r[f"{m}_hi"] for m in METRICS]])
         for r in rows
     }
+    height = 0.6 * len(rows)  # inches: the label goes below the tick labels, whatever the rows
     fig, _ = plot_utils.plot_interval_estimates(
-        points, intervals, metric_names=METRIC_TITLES, xlabel=normalized_name
+        points,
+        intervals,
+        metric_names=METRIC_TITLES,
+        xlabel=normalized_name,
+        row_height=0.6,
+        xlabel_y_coordinate=-0.55 / height,
     )
     aggregate_png = figures / "aggregate.png"
     fig.savefig(aggregate_png, dpi=120, bbox_inches="tight")

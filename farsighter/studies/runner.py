@@ -483,10 +483,21 @@ def band(ax: Any, x: np.ndarray, curves: np.ndarray, color: Any, label: str | No
     ax.fill_between(x, mean - std, mean + std, color=color, alpha=0.15)
 
 
+def short_count(x: float) -> str:
+    """A step count for an axis: 0, 500, 10k, 12.5k, 1.5M."""
+    for div, unit in ((1e6, "M"), (1e3, "k")):
+        if abs(x) >= div:
+            return f"{x / div:g}{unit}"
+    return f"{x:g}"
+
+
 def finish_axes(ax: Any, xlabel: str, ylabel: str, title: str, **legend: Any) -> None:
-    """Labels, title, legend and grid of a curve plot."""
+    """Labels, title, legend and grid of a curve plot; step counts read 10k, 1.5M."""
+    from matplotlib.ticker import FuncFormatter
+
+    ax.xaxis.set_major_formatter(FuncFormatter(lambda x, _: short_count(x)))
     ax.set_xlabel(xlabel)
     ax.set_ylabel(ylabel)
     ax.set_title(title)
-    ax.legend(fontsize=8, **legend)
+    ax.legend(**{"fontsize": 8, **legend})
     ax.grid(alpha=0.3)

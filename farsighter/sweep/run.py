@@ -298,6 +298,7 @@ def _plot_curves(spec: SweepSpec, out: Path, file: Path) -> None:
     import matplotlib.pyplot as plt
 
     from farsighter.plots import read_csv
+    from farsighter.studies.runner import finish_axes
 
     envs = list(dict.fromkeys(t.env for t in spec.trials))
     fig, axes = plt.subplots(1, len(envs), figsize=(5 * len(envs), 3.6), squeeze=False)
@@ -318,10 +319,7 @@ def _plot_curves(spec: SweepSpec, out: Path, file: Path) -> None:
             mean, std = ys.mean(0), ys.std(0)
             ax.plot(x, mean, label=name)
             ax.fill_between(x, mean - std, mean + std, alpha=0.2)
-        ax.set_title(env)
-        ax.set_xlabel("environment steps")
-        ax.set_ylabel("evaluation return")
-        ax.legend(fontsize=7)
+        finish_axes(ax, "environment steps", "evaluation return", env, fontsize=7)
     fig.tight_layout()
     fig.savefig(file, dpi=110)
     plt.close(fig)
