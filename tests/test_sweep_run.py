@@ -162,3 +162,19 @@ def test_the_shipped_sweep_files_expand_into_valid_trials(file: Path) -> None:
 def test_a_study_refuses_address_without_ray(capsys: pytest.CaptureFixture[str]) -> None:
     assert cli_main(["maze", "--quick", "--address", "localhost:6379"]) == 2
     assert "--address joins a Ray cluster and needs --ray" in capsys.readouterr().err
+
+
+def test_atari_sweeps_are_human_normalised() -> None:
+    from farsighter.sweep.run import normalization, score_table
+
+    assert normalization(["ALE/Breakout-v5", "ALE/Pong-v5"]) == "human"
+    assert normalization(["CartPole-v1"]) == "raw"
+    assert normalization(["CartPole-v1", "ALE/Pong-v5"]) == "minmax"
+    # Breakout's random and human scores are 1.7 and 30.5
+    rows = [
+        {"variant": "a", "env": "ALE/Breakout-v5", "seed": s, "final_eval_return": r}
+        for s, r in ((1, 1.7), (2, 30.5))
+    ]
+    table, envs = score_table(rows, "human")
+    assert envs == ["ALE/Breakout-v5"]
+    assert table["a"][:, 0].tolist() == pytest.approx([0.0, 1.0])

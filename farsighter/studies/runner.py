@@ -354,7 +354,7 @@ def _prepare(study: Study, settings: Any, out: Path) -> list[Job]:
     current = json.loads(json.dumps(dataclasses.asdict(settings)))
     if saved.exists():
         # a field added since it was saved takes its default
-        previous = json.loads(json.dumps(dataclasses.asdict(settings_of(study, _read_json(saved)))))
+        previous = json.loads(json.dumps(dataclasses.asdict(settings_of(study, _read(saved)))))
         if {**previous, "workers": 0} != {**current, "workers": 0}:
             raise FarsighterError(
                 f"{out} holds a study with other settings ({saved}); use another --out or "
@@ -423,10 +423,6 @@ def load_runs(study: Study, out: Path) -> tuple[dict[str, Any], Runs]:
             f"{out} holds no finished {study.kind} runs (runs/*/{' and '.join(study.finished)})"
         )
     return saved, runs
-
-
-def _read_json(file: Path) -> Any:
-    return json.loads(file.read_text())
 
 
 def settings_of(study: Study, saved: dict[str, Any]) -> Any:

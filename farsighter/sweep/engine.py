@@ -202,7 +202,7 @@ def _on_processes(
                     if proc.exitcode == 0:
                         finished += steps[i]
                         continue
-                    message = errors.pop(i, "") if i in errors else ""
+                    message = errors.pop(i, "")
                     if proc.exitcode == FATAL_EXIT:
                         raise FarsighterError(message)
                     why = f"exit code {proc.exitcode}" + (

@@ -228,14 +228,12 @@ def results(spec: SweepSpec, out: Path) -> list[dict[str, Any]]:
 
 def normalization(envs: Sequence[str]) -> str:
     """human (every env an ALE game with reference scores), raw (one env), else minmax."""
-    from farsighter.envs.atari_scores import baseline
+    from farsighter.envs.atari import game_of
+    from farsighter.envs.atari_scores import BASELINES
 
-    try:
-        for env in envs:
-            baseline(env)
+    if all(game_of(env) in BASELINES for env in envs):
         return "human"
-    except FarsighterError:
-        return "raw" if len(envs) == 1 else "minmax"
+    return "raw" if len(envs) == 1 else "minmax"
 
 
 def score_table(rows: list[dict[str, Any]], how: str) -> tuple[dict[str, np.ndarray], list[str]]:
@@ -243,12 +241,13 @@ def score_table(rows: list[dict[str, Any]], how: str) -> tuple[dict[str, np.ndar
     (Atari: random 0, human 1), ``minmax`` (per env: the lowest run of any variant 0, the highest
     1), or ``raw``. Only the seeds a variant finished on every env are kept."""
     from farsighter.aggregate import minmax_normalized
+    from farsighter.envs.atari import game_of
     from farsighter.envs.atari_scores import human_normalized
 
     envs = sorted({r["env"] for r in rows})
     score = {(r["variant"], r["env"], r["seed"]): float(r["final_eval_return"]) for r in rows}
     if how == "human":
-        score = {key: human_normalized(key[1], v) for key, v in score.items()}
+        score = {key: human_normalized(str(game_of(key[1])), v) for key, v in score.items()}
     table = {}
     for name in dict.fromkeys(r["variant"] for r in rows):
         per_env = [{s for (v, e, s) in score if v == name and e == env} for env in envs]
