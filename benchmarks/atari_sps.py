@@ -123,6 +123,7 @@ def run_one(spec: dict[str, Any]) -> dict[str, Any]:
             torch_threads=threads,
             device=spec["device"],
             precision=spec["precision"],
+            cuda_graph=spec.get("cuda_graph", "auto"),
             eval_every=0,
             eval_episodes=1,  # the final evaluation is outside the window; keep it short
             eval_max_steps=200,
@@ -148,6 +149,7 @@ def run_one(spec: dict[str, Any]) -> dict[str, Any]:
         "algo": spec["algo"],
         "num_envs": spec["num_envs"],
         "precision": spec["precision"],
+        "cuda_graph": cfg.cuda_graph,
         "threads": torch.get_num_threads(),
         "device": spec["device"],
         "backend": backend,
@@ -398,6 +400,9 @@ def parse_args() -> argparse.Namespace:
     )
     p.add_argument("--precision", nargs="+", choices=["fp32", "bf16"], default=["fp32", "bf16"])
     p.add_argument("--threads", type=int, default=2, help="torch threads (CleanRL's too)")
+    p.add_argument(
+        "--cuda-graph", choices=["auto", "on", "off"], default="auto", help="Config.cuda_graph"
+    )
     p.add_argument("--warmup", type=int, help="steps before the window (2,000 CPU, 10,000 CUDA)")
     p.add_argument("--learning-starts", type=int, help="<= warmup (default: warmup)")
     p.add_argument("--measure", type=int, help="steps in the window (4,000 CPU, 30,000 CUDA)")
@@ -452,6 +457,7 @@ def main() -> None:
         "target_update_every": args.target_update_every,
         "backend": backend,
         "seed": args.seed,
+        "cuda_graph": args.cuda_graph,
     }
     configs = [
         {**base, "algo": a, "num_envs": e, "precision": p, "buffer_size": SPEED_BUFFER}
@@ -561,6 +567,7 @@ def main() -> None:
                 "target_update_every": args.target_update_every,
                 "buffer_size": SPEED_BUFFER,
                 "backend": backend,
+                "cuda_graph": args.cuda_graph,
                 "repeats": args.repeats,
                 "seed": args.seed,
                 "statistic": "median over rounds",

@@ -8,7 +8,8 @@ Three layouts of the same network (same initial weights):
 * ``fp32_channels_last``: the library's NatureCNN (NHWC weights, inputs converted);
 * ``bf16``: the library's NatureCNN under bfloat16 autocast (``set_precision``).
 
-For each: the median milliseconds of a whole update (``--repeats`` after ``--warmup``), and of
+For each: the median milliseconds of a whole update (``--repeats`` after ``--warmup``; on CUDA
+also captured as a CUDA graph and replayed, ``update_ms_cuda_graph``), and of
 its phases timed one by one (with a device synchronisation at each boundary on CUDA):
 ``forward_s`` (Q(s) with grad), ``targets_s_next`` (online and target Q(s') without grad, the
 double-Q target), ``backward`` (loss, zero_grad, backward) and ``optimizer`` (clip and RMSProp
@@ -37,6 +38,7 @@ from torch import nn
 from benchmarks.common import cpu_features, write_result
 from farsighter import make_config
 from farsighter.agents.common import make_optimizer, obs_tensor, td_loss
+from farsighter.agents.cuda_graph import GraphedStep, set_capturable
 from farsighter.networks import NatureCNN, set_precision
 from farsighter.ops.blr import BLRHead
 from farsighter.ops.targets import double_q_target
@@ -129,6 +131,17 @@ def profile_layout(
         optimizer()
 
     whole = median_ms(update, sync, args.warmup, args.repeats)
+    graphed = None
+    if device.type == "cuda":  # the same update captured once and replayed (Config.cuda_graph)
+
+        def step_fn(_: dict[str, torch.Tensor]) -> dict[str, torch.Tensor]:
+            update()
+            return {}
+
+        set_capturable(opt, True)
+        step = GraphedStep(step_fn)
+        graphed = round(median_ms(lambda: step({}), sync, args.warmup, args.repeats), 3)
+        set_capturable(opt, False)
 
     phases: dict[str, list[float]] = {
         "forward_s": [],
@@ -197,6 +210,7 @@ def profile_layout(
     top = profile_ops(update, sync, args, device) if args.profile_steps > 0 else None
     return {
         "update_ms": round(whole, 3),
+        "update_ms_cuda_graph": graphed,
         "phases_ms": phase_ms,
         "phases_sum_ms": round(sum(phase_ms.values()), 3),
         "per_step_extras_ms": extras,
@@ -282,6 +296,7 @@ def main() -> None:
         "repeats": args.repeats,
         "statistic": "median ms",
         "update_ms": {k: v["update_ms"] for k, v in layouts.items()},
+        "update_ms_cuda_graph": {k: v["update_ms_cuda_graph"] for k, v in layouts.items()},
         "speedup_over_fp32_nchw": speedup,
         "issue_update_ms": {k: ISSUE_MS[k] for k in layouts},
         "issue_note": "the issue's figures, a quiet machine at 2 threads (machine.load_average "

@@ -270,6 +270,12 @@ class Config:
     newer GPUs; slow where the hardware lacks bfloat16). Features, heads, the BLR posterior,
     targets, losses, parameters and optimizer state stay fp32 either way. Never on unless
     asked; docs/design.md gives its measured effect on learning."""
+    cuda_graph: Literal["auto", "on", "off"] = "auto"
+    """Capture the update step (forward, loss, backward, optimizer) as a CUDA graph and replay it
+    each update, so the host launches it once instead of kernel by kernel
+    (farsighter.agents.cuda_graph). auto: on a CUDA device, for the agents whose update allows
+    it (ddqn, kddqn, bdqn, farsighter); on: insist (refused for the others, and on CPU); off:
+    eager. The updates are the same either way."""
     resume: bool = False
     """Continue the run in run_dir from its last checkpoint."""
     overwrite: bool = False
@@ -868,6 +874,16 @@ def _ob2i_rnd_checks(cfg: Config, spec: algorithms.Algorithm) -> list[tuple[bool
     ]
 
 
+GRAPH_AGENTS = ("ddqn", "farsighter")
+"""Agents whose update can be captured as a CUDA graph (farsighter.agents.cuda_graph)."""
+
+
+def graph_supported(cfg: Config, spec: algorithms.Algorithm) -> bool:
+    """Whether the update of ``spec``'s agent under ``cfg`` can be captured (its agent is one of
+    :data:`GRAPH_AGENTS`; OB2I, RND and NAF update eagerly)."""
+    return spec.agent in GRAPH_AGENTS
+
+
 def _algorithm_checks(cfg: Config, spec: algorithms.Algorithm) -> list[tuple[bool, str]]:
     """What the algorithm table allows, and the device."""
     adaptive = " and ".join(a.name for a in algorithms.TABLE if a.adaptive_k)
@@ -878,6 +894,20 @@ def _algorithm_checks(cfg: Config, spec: algorithms.Algorithm) -> list[tuple[boo
             f"adaptive_k.enabled is only supported by --algo {adaptive}",
         ),
         (device_ok, f"unknown device '{cfg.device}'; accepted: auto, cpu, cuda, cuda:N"),
+        (
+            cfg.cuda_graph in ("auto", "on", "off"),
+            f"cuda_graph must be auto, on or off (got {cfg.cuda_graph!r})",
+        ),
+        (
+            cfg.cuda_graph != "on" or cfg.device not in ("cpu",),
+            "cuda_graph on needs a CUDA device (device cpu given); use auto or off",
+        ),
+        (
+            cfg.cuda_graph != "on" or graph_supported(cfg, spec),
+            "cuda_graph on is supported by --algo "
+            + ", ".join(a.name for a in algorithms.TABLE if a.agent in GRAPH_AGENTS)
+            + "; use auto or off",
+        ),
         (
             cfg.k_target == "k" or spec.agent == "farsighter",
             "k_target max is only supported by --algo "

@@ -36,7 +36,8 @@ class Torso(nn.Module):
     def forward(self, obs: torch.Tensor) -> torch.Tensor:
         if self.precision == "fp32":
             return self.body(obs)
-        with torch.autocast(obs.device.type, dtype=torch.bfloat16):
+        # no cast cache: it would outlive a CUDA graph capture (and a region casts each weight once)
+        with torch.autocast(obs.device.type, dtype=torch.bfloat16, cache_enabled=False):
             return self.body(obs).float()
 
 

@@ -44,6 +44,7 @@ RESUMABLE_FIELDS = {
     "overwrite",
     "total_steps",
     "device",
+    "cuda_graph",
     "progress",
     "run_dir",
     "torch_threads",

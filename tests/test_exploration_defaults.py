@@ -191,8 +191,8 @@ def test_k_target_max_is_the_larger_of_the_k_and_one_step_targets(tmp_path: Path
     captured = {}
     original = agent._targets
 
-    def spy(t):  # record every target computed during one update
-        y = original(t)
+    def spy(t, *draws):  # record every target computed during one update
+        y = original(t, *draws)
         captured.setdefault("ys", []).append(y)
         return y
 

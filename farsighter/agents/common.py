@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import copy
 import dataclasses
 from collections.abc import Iterable, Sequence
 from dataclasses import dataclass
@@ -96,6 +97,14 @@ class TensorBatch:
     """sum_{i<n} gamma^i r_{t+i}, shape (B,)."""
     bootstrap_B: torch.Tensor
     """gamma^n, or 0 where the episode terminated inside the window, shape (B,)."""
+
+    def tensors(self) -> dict[str, torch.Tensor]:
+        """The fields by name (a captured step's inputs; :meth:`of` reads them back)."""
+        return {f.name: getattr(self, f.name) for f in dataclasses.fields(self)}
+
+    @classmethod
+    def of(cls, tensors: dict[str, torch.Tensor]) -> TensorBatch:
+        return cls(**{f.name: tensors[f.name] for f in dataclasses.fields(cls)})
 
 
 def batch_tensors(batch: Batch, device: torch.device) -> TensorBatch:
@@ -223,10 +232,19 @@ def load_state(agent: Any, names: Sequence[str], state: dict[str, Any]) -> None:
         elif dataclasses.is_dataclass(current):
             for key, item in value.items():
                 setattr(current, key, item)
+        elif isinstance(current, torch.optim.Optimizer):
+            # torch keeps the given state tensors (no copy on the same device): copy them, so
+            # that this agent never shares its optimizer state with the one that saved it
+            current.load_state_dict(copy.deepcopy(value))
         elif hasattr(current, "load_state_dict"):
             current.load_state_dict(value)
         elif isinstance(value, torch.Tensor):
-            setattr(agent, name, value.to(agent.device))
+            # into the tensor the agent holds when it fits (a captured CUDA graph may read it),
+            # else a copy: never the caller's tensor, which a later in-place update would change
+            if isinstance(current, torch.Tensor) and current.shape == value.shape:
+                current.copy_(value)
+            else:
+                setattr(agent, name, value.to(agent.device, copy=True))
         elif isinstance(value, np.ndarray):
             setattr(agent, name, value.copy())
         else:

@@ -28,6 +28,13 @@ from farsighter.agents.common import (
     td_loss,
     updates_owed,
 )
+from farsighter.agents.cuda_graph import (
+    Tensors,
+    graphs_enabled,
+    reset_step,
+    set_capturable,
+    wrap_step,
+)
 from farsighter.agents.protocol import AgentFactory
 from farsighter.config import Config
 from farsighter.networks import QNetwork
@@ -56,6 +63,10 @@ class DDQNAgent:
         self.q_target = copy.deepcopy(self.q)
         self.q_target.requires_grad_(False)
         self.opt = make_optimizer(self.q.parameters(), cfg)
+        # The update as a CUDA graph on a GPU (cfg.cuda_graph; farsighter.agents.cuda_graph).
+        self.graphs = graphs_enabled(cfg.cuda_graph, device, supported=True)
+        set_capturable(self.opt, self.graphs)
+        self.step = wrap_step(self._step, self.graphs)
         self.replay = make_replay(cfg, obs_space, frame_stack, seed=cfg.seed + 1)
         self.rng = np.random.default_rng(cfg.seed + 2)
         self.counters = Counters(k=cfg.k)
@@ -99,12 +110,16 @@ class DDQNAgent:
         """One gradient step on the double-Q loss of a k-step minibatch; returns the loss."""
         cfg = self.cfg
         batch = sample_minibatch(self.replay, cfg, cfg.batch_size, self.counters.k)
-        t = batch_tensors(batch, self.device)
+        return self.step(batch_tensors(batch, self.device).tensors())["loss"]
+
+    def _step(self, inputs: Tensors) -> Tensors:
+        """The update on a minibatch already on the device (captured whole on a GPU)."""
+        t = TensorBatch.of(inputs)
         q_B = self.q(t.obs_B).gather(1, t.actions_B.unsqueeze(1)).squeeze(1)
         y_B = self.targets(t)
         loss = td_loss(q_B, y_B, self.cfg.loss)
-        clip_and_step(loss, list(self.q.parameters()), self.opt, cfg.max_grad_norm)
-        return loss.detach()
+        clip_and_step(loss, list(self.q.parameters()), self.opt, self.cfg.max_grad_norm)
+        return {"loss": loss.detach()}
 
     @torch.no_grad()
     def targets(self, t: TensorBatch) -> torch.Tensor:
@@ -125,6 +140,8 @@ class DDQNAgent:
 
     def load_state_dict(self, state: dict[str, Any]) -> None:
         load_state(self, self.SAVED, state)
+        set_capturable(self.opt, self.graphs)
+        reset_step(self.step)
 
 
 AGENT: AgentFactory = DDQNAgent  # the class farsighter.algorithms names; mypy checks the protocol

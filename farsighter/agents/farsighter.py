@@ -35,6 +35,7 @@ import numpy as np
 import torch
 from torch import nn
 
+from farsighter import algorithms
 from farsighter.agents.common import (
     Counters,
     TensorBatch,
@@ -53,8 +54,15 @@ from farsighter.agents.common import (
     td_loss,
     updates_owed,
 )
+from farsighter.agents.cuda_graph import (
+    Tensors,
+    graphs_enabled,
+    reset_step,
+    set_capturable,
+    wrap_step,
+)
 from farsighter.agents.protocol import AgentFactory
-from farsighter.config import Config
+from farsighter.config import Config, graph_supported
 from farsighter.networks import make_torso
 from farsighter.ops.blr import BLRHead, greedy_predictive_variance
 from farsighter.ops.targets import double_q_target
@@ -110,6 +118,13 @@ class FarsighterAgent:
         self.head.set_mean(init_AD.to(device))
         self.target_mean_AD = self.head.mean_AD.clone()
         self.opt = make_optimizer(self.torso.parameters(), cfg)
+        # The update as a CUDA graph on a GPU (cfg.cuda_graph; farsighter.agents.cuda_graph).
+        # What it reads between updates changes in place: torso parameters, the target torso
+        # (load_state_dict copies), head.mean_AD and target_mean_AD (copied into).
+        supported = graph_supported(cfg, algorithms.get(cfg.algo))
+        self.graphs = graphs_enabled(cfg.cuda_graph, device, supported)
+        set_capturable(self.opt, self.graphs)
+        self.step = wrap_step(self._step, self.graphs)
         self.replay = make_replay(cfg, obs_space, frame_stack, seed=cfg.seed + 1)
         self.rng = np.random.default_rng(cfg.seed + 2)
         self.gen = torch.Generator(device=device)
@@ -200,7 +215,7 @@ class FarsighterAgent:
         ):
             self.refresh_posterior()
         if sync_target(c, global_step, cfg.target_update_every, (self.torso, self.torso_target)):
-            self.target_mean_AD = self.head.mean_AD.clone()  # Algorithm 1 line 8
+            self.target_mean_AD.copy_(self.head.mean_AD)  # Algorithm 1 line 8
         return metrics
 
     def _sample(self) -> Batch | None:
@@ -211,19 +226,27 @@ class FarsighterAgent:
             return None
 
     @torch.no_grad()
-    def _targets(self, t: TensorBatch) -> torch.Tensor:
+    def _targets(
+        self,
+        t: TensorBatch,
+        w_online_AD: torch.Tensor | None = None,
+        z_BAD: torch.Tensor | None = None,
+    ) -> torch.Tensor:
         """y = r^k + gamma^k phi_target(s')^T mean_target[a*] (Eq. 8 with k-step returns).
 
         a* is the argmax under the online features and the posterior mean (Eq. 8), or under the
-        latest acting Thompson draw when ``blr.target = thompson`` (the BDQN authors' code)."""
+        latest acting Thompson draw when ``blr.target = thompson`` (the BDQN authors' code).
+        ``w_online_AD`` (that draw) and ``z_BAD`` (the normals of ``blr.target = sample``) are
+        drawn here unless given (:meth:`_draws`, for the captured update)."""
         phi_next = self.torso(t.next_obs_B)
-        thompson = self.cfg.blr.target == "thompson"
-        w_online_AD = self._acting_draw() if thompson else self.head.mean_AD
+        if w_online_AD is None:
+            thompson = self.cfg.blr.target == "thompson"
+            w_online_AD = self._acting_draw() if thompson else self.head.mean_AD
         q_next_online = phi_next @ w_online_AD.T
         phi_next_target = self.torso_target(t.next_obs_B)
         q_next_target = phi_next_target @ self.target_mean_AD.T
         if self.cfg.blr.target == "sample":
-            noise_BA = self.head.q_noise(phi_next_target, generator=self.gen)
+            noise_BA = self.head.q_noise(phi_next_target, generator=self.gen, z_BAD=z_BAD)
             q_next_online = q_next_online + noise_BA
             q_next_target = q_next_target + noise_BA
         return double_q_target(t.returns_B, t.bootstrap_B, q_next_online, q_next_target)
@@ -243,21 +266,62 @@ class FarsighterAgent:
         if batch is None:
             return None
         t = batch_tensors(batch, self.device)
-        y_B = self._targets(t)
+        inputs = t.tensors()
         if self.cfg.k_target == "max" and self.counters.k > 1:
             # The larger of the k-step and the one-step target of the same start (lower-bound
-            # Q-learning, Tang 2020): see Config.k_target.
-            one = self.replay.gather(batch.env_index, batch.index, 1, self.cfg.gamma)
-            y_B = torch.maximum(y_B, self._targets(batch_tensors(one, self.device)))
+            # Q-learning, Tang 2020): see Config.k_target. Same s and a, so only s', r, gamma.
+            one = batch_tensors(
+                self.replay.gather(batch.env_index, batch.index, 1, self.cfg.gamma), self.device
+            )
+            inputs.update(
+                one_next_obs_B=one.next_obs_B,
+                one_returns_B=one.returns_B,
+                one_bootstrap_B=one.bootstrap_B,
+            )
+        out = self.step({**inputs, **self._draws(len(batch.actions), "one_next_obs_B" in inputs)})
+        if self.cfg.blr.mode == "incremental":
+            self._accumulate(out["phi_BD"], t.actions_B, out["y_post_B"])
+        return out["loss"]
+
+    def _draws(self, rows: int, one_step: bool) -> Tensors:
+        """What a target draws, drawn before the update so a captured step takes it as input: the
+        acting draw (``blr.target = thompson``), or the normals of the k-step target and then of
+        the one-step target (``sample``), in the order the eager targets draw them."""
+        target = self.cfg.blr.target
+        if target == "thompson":
+            return {"w_online_AD": self._acting_draw()}
+        if target != "sample":
+            return {}
+        draws = {"z_BAD": self.head.noise_z(rows, self.gen)}
+        if one_step:
+            draws["one_z_BAD"] = self.head.noise_z(rows, self.gen)
+        return draws
+
+    def _step(self, inputs: Tensors) -> Tensors:
+        """The update on a minibatch already on the device (captured whole on a GPU): the
+        target, the loss at the posterior mean, and the optimizer step on theta."""
+        t = TensorBatch.of(inputs)
+        w = inputs.get("w_online_AD")
+        y_B = self._targets(t, w, inputs.get("z_BAD"))
+        if "one_next_obs_B" in inputs:  # k_target = max
+            one = TensorBatch(
+                obs_B=t.obs_B,
+                next_obs_B=inputs["one_next_obs_B"],
+                actions_B=t.actions_B,
+                returns_B=inputs["one_returns_B"],
+                bootstrap_B=inputs["one_bootstrap_B"],
+            )
+            y_B = torch.maximum(y_B, self._targets(one, w, inputs.get("one_z_BAD")))
         phi_BD = self.torso(t.obs_B)
         q_B = (phi_BD @ self.head.mean_AD.T).gather(1, t.actions_B[:, None])[:, 0]
         loss = td_loss(q_B, y_B, self.cfg.loss)
         clip_and_step(loss, list(self.torso.parameters()), self.opt, self.cfg.max_grad_norm)
-        if self.cfg.blr.mode == "incremental":
+        out = {"loss": loss.detach()}
+        if self.cfg.blr.mode == "incremental":  # the statistics are added outside the step
             double = self.cfg.blr.posterior_target == "double"
-            y_post_B = y_B if double else self._posterior_targets(t)
-            self._accumulate(phi_BD.detach(), t.actions_B, y_post_B)
-        return loss.detach()
+            out["phi_BD"] = phi_BD.detach()
+            out["y_post_B"] = y_B if double else self._posterior_targets(t)
+        return out
 
     def _accumulate(self, phi_BD: torch.Tensor, a_B: torch.Tensor, y_B: torch.Tensor) -> None:
         """Add a minibatch to the running statistics with weight w = train_every / batch_size
@@ -344,6 +408,8 @@ class FarsighterAgent:
 
     def load_state_dict(self, state: dict[str, Any]) -> None:
         load_state(self, self.SAVED, state)
+        set_capturable(self.opt, self.graphs)
+        reset_step(self.step)  # target_mean_AD and the head's tensors were rebound
 
 
 AGENT: AgentFactory = (

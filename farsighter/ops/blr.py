@@ -375,10 +375,13 @@ class BLRHead:
     def _rebuild_cache(self) -> None:
         # float32 copies for acting. The square roots are laid out as (D, A*D) so that phi_BD @ it
         # gives phi^T U_a for every action in a single GEMM (used by q_sample and predictive_var).
+        # They are refreshed in place, so a captured CUDA graph (farsighter.agents.cuda_graph) that
+        # reads mean_AD sees every refresh.
         a, d = self.num_actions, self.dim
-        self._mean32_AD = self._mean_AD.to(torch.float32).contiguous()
-        self._sqrt_cov32_ADD = self._sqrt_cov_ADD.to(torch.float32).contiguous()
-        self._sqrt_cov32_DX = self._sqrt_cov32_ADD.permute(1, 0, 2).reshape(d, a * d).contiguous()
+        self._mean32_AD = _in_place(getattr(self, "_mean32_AD", None), self._mean_AD)
+        self._sqrt_cov32_ADD = _in_place(getattr(self, "_sqrt_cov32_ADD", None), self._sqrt_cov_ADD)
+        sqrt_cov_DX = self._sqrt_cov32_ADD.permute(1, 0, 2).reshape(d, a * d)
+        self._sqrt_cov32_DX = _in_place(getattr(self, "_sqrt_cov32_DX", None), sqrt_cov_DX)
 
     # ----------------------------------------------------------------------------------------------
     # posterior access
@@ -435,10 +438,15 @@ class BLRHead:
 
     @torch.no_grad()
     def q_noise(
-        self, phi_BD: torch.Tensor, generator: torch.Generator | None = None
+        self,
+        phi_BD: torch.Tensor,
+        generator: torch.Generator | None = None,
+        z_BAD: torch.Tensor | None = None,
     ) -> torch.Tensor:
         """The random part of ``q_sample``: sqrt(cov_scale) phi^T U_a z with a fresh z per row and
-        action, shape (B, A); its variance is ``predictive_var``."""
+        action, shape (B, A); its variance is ``predictive_var``. ``z_BAD`` gives the standard
+        normals (:meth:`noise_z` draws the same ones from the same generator state), so that a
+        captured CUDA graph can take them as an input."""
         phi_BD = self._phi32(phi_BD)
         a, d = self.num_actions, self.dim
         noise_BA = torch.empty(phi_BD.shape[0], a, dtype=torch.float32, device=self.device)
@@ -446,11 +454,29 @@ class BLRHead:
         step = self._block_rows()
         for lo in range(0, phi_BD.shape[0], step):
             phiu_KAD = (phi_BD[lo : lo + step] @ self._sqrt_cov32_DX).view(-1, a, d)
-            z_KAD = torch.randn(
-                phiu_KAD.shape, generator=generator, device=self.device, dtype=torch.float32
-            )
+            if z_BAD is None:
+                z_KAD = torch.randn(
+                    phiu_KAD.shape, generator=generator, device=self.device, dtype=torch.float32
+                )
+            else:
+                z_KAD = z_BAD[lo : lo + step]
             noise_BA[lo : lo + step] = scale * (phiu_KAD * z_KAD).sum(-1)
         return noise_BA
+
+    def noise_z(self, rows: int, generator: torch.Generator | None = None) -> torch.Tensor:
+        """The standard normals ``q_noise`` draws for ``rows`` rows, shape (rows, A, D), drawn block
+        by block as it draws them (the same numbers from the same generator state)."""
+        a, d, step = self.num_actions, self.dim, self._block_rows()
+        blocks = [
+            torch.randn(
+                (min(step, rows - lo), a, d),
+                generator=generator,
+                device=self.device,
+                dtype=torch.float32,
+            )
+            for lo in range(0, rows, step)
+        ]
+        return blocks[0] if len(blocks) == 1 else torch.cat(blocks)
 
     @torch.no_grad()
     def sample_weights(self, n: int, generator: torch.Generator | None = None) -> torch.Tensor:
@@ -563,6 +589,13 @@ class BLRHead:
 
 
 @torch.no_grad()
+def _in_place(cache: torch.Tensor | None, value: torch.Tensor) -> torch.Tensor:
+    """``value`` as a contiguous float32 tensor, written into ``cache`` when it fits."""
+    if cache is not None and cache.shape == value.shape and cache.device == value.device:
+        return cache.copy_(value)
+    return value.to(torch.float32).contiguous().clone()
+
+
 def greedy_predictive_variance(head: BLRHead, phi_BD: torch.Tensor) -> float:
     """Q-variance for adaptive k (Alg. 1 line 7, SPEC 2.1).
 
