@@ -266,8 +266,9 @@ class Config:
     """auto (CUDA when present, else CPU), cpu, cuda or cuda:N."""
     precision: Literal["fp32", "bf16"] = "fp32"
     """Arithmetic of the networks' torsos: fp32, or bf16 autocast (bfloat16 convolutions and
-    matmuls; about 1.7x faster Atari updates on CPUs with AVX-512 BF16 or AMX, and on Ampere or
-    newer GPUs; slow where the hardware lacks bfloat16). Features, heads, the BLR posterior,
+    matmuls; about 1.7x faster Atari updates on CPUs with AVX-512 BF16 or AMX; no faster on an
+    H100 at batch 32, where the update is bound by kernel launches; slow where the hardware
+    lacks bfloat16). Features, heads, the BLR posterior,
     targets, losses, parameters and optimizer state stay fp32 either way. Never on unless
     asked; docs/design.md gives its measured effect on learning."""
     cuda_graph: Literal["auto", "on", "off"] = "auto"

@@ -11,6 +11,7 @@ import numpy as np
 import torch
 
 from farsighter.agents import Agent, build_agent
+from farsighter.agents.cuda_graph import graphs_enabled
 from farsighter.config import Config, load_config, validate
 from farsighter.envs import check_spaces, frame_stack_of, make_env, make_vector_env
 from farsighter.errors import ConfigError, RunDirError
@@ -55,6 +56,7 @@ def train(cfg: Config, callbacks: Sequence[Callback] = ()) -> dict[str, Any]:
     ``callbacks`` see every vector step's ``info`` and the agent, read-only by contract."""
     validate(cfg)
     device = resolve_device(cfg.device)
+    graphs_enabled(cfg.cuda_graph, device, supported=True)  # cuda_graph on with no GPU: refused
     envs: gym.vector.VectorEnv = make_vector_env(
         cfg, seed=cfg.seed
     )  # a bad id fails before the run dir is touched

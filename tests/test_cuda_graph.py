@@ -212,3 +212,13 @@ def test_an_agent_loaded_from_another_continues_as_it_would(tmp_path: Path, devi
         assert a.step.captures == 2
     for x, y in zip(_params(a), _params(b), strict=True):
         torch.testing.assert_close(x, y, rtol=1e-4, atol=1e-5)
+
+
+@pytest.mark.skipif(CUDA, reason="checks the refusal on a machine without CUDA")
+def test_cuda_graph_on_without_a_gpu_is_refused_before_the_run_dir(tmp_path: Path) -> None:
+    from farsighter import train
+
+    cfg = tiny("ddqn", tmp_path / "run", cuda_graph="on")  # device auto resolves to the CPU
+    with pytest.raises(ConfigError, match="needs a CUDA device"):
+        train(cfg)
+    assert not (tmp_path / "run").exists()
