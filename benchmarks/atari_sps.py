@@ -46,6 +46,7 @@ from typing import Any
 import torch
 
 from benchmarks.common import REPO, cpu_features, write_result
+from farsighter.config import Config
 
 ENV = "ALE/Breakout-v5"
 CLEANRL_ENV = "BreakoutNoFrameskip-v4"  # what dqn_atari.py expects: frame skip in its wrappers
@@ -99,40 +100,49 @@ class Window:
         self.replay_bytes = None if replay is None else int(replay.nbytes)
 
 
+def steady_state_config(spec: dict[str, Any], run_dir: str) -> Config:
+    """The config of one measurement: Breakout, the Atari preset, epsilon at its final value,
+    replay ratio 1/4, no evaluations or checkpoints inside the window."""
+    from farsighter import make_config
+
+    threads = spec["threads"]
+    return make_config(
+        spec["algo"],
+        ENV,
+        seed=spec["seed"],
+        total_steps=spec["warmup"] + spec["measure"],
+        learning_starts=spec["learning_starts"],
+        num_envs=spec["num_envs"],
+        train_every=TRAIN_EVERY,
+        eps_start=EPSILON,
+        eps_end=EPSILON,
+        eps_decay_steps=1,
+        target_update_every=spec["target_update_every"],
+        buffer_size=spec["buffer_size"],
+        torch_threads=threads,
+        device=spec["device"],
+        precision=spec["precision"],
+        cuda_graph=spec.get("cuda_graph", "auto"),
+        eval_every=0,
+        eval_episodes=1,  # the final evaluation is outside the window; keep it short
+        eval_max_steps=200,
+        checkpoint_every=0,
+        save_replay=False,
+        progress=False,
+        run_dir=run_dir,
+        **{"atari.backend": spec["backend"]},
+    )
+
+
 def run_one(spec: dict[str, Any]) -> dict[str, Any]:
     """Train ``spec['algo']`` on Breakout for warmup + measure steps; the window's figures."""
-    from farsighter import make_config, train
+    from farsighter import train
     from farsighter.envs.envpool_vec import envpool_supports
 
     threads = spec["threads"]
     torch.set_num_threads(threads)
     with tempfile.TemporaryDirectory() as tmp:
-        cfg = make_config(
-            spec["algo"],
-            ENV,
-            seed=spec["seed"],
-            total_steps=spec["warmup"] + spec["measure"],
-            learning_starts=spec["learning_starts"],
-            num_envs=spec["num_envs"],
-            train_every=TRAIN_EVERY,
-            eps_start=EPSILON,
-            eps_end=EPSILON,
-            eps_decay_steps=1,
-            target_update_every=spec["target_update_every"],
-            buffer_size=spec["buffer_size"],
-            torch_threads=threads,
-            device=spec["device"],
-            precision=spec["precision"],
-            cuda_graph=spec.get("cuda_graph", "auto"),
-            eval_every=0,
-            eval_episodes=1,  # the final evaluation is outside the window; keep it short
-            eval_max_steps=200,
-            checkpoint_every=0,
-            save_replay=False,
-            progress=False,
-            run_dir=f"{tmp}/run",
-            **{"atari.backend": spec["backend"]},
-        )
+        cfg = steady_state_config(spec, f"{tmp}/run")
         window = Window(spec["warmup"])
         summary = train(cfg, callbacks=[window])
     first, last = window.first, window.last

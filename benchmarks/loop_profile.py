@@ -21,7 +21,7 @@ from typing import Any
 
 import torch
 
-from benchmarks.atari_sps import ENV, EPSILON, TRAIN_EVERY, Window
+from benchmarks.atari_sps import Window, steady_state_config
 from benchmarks.common import write_result
 
 
@@ -55,37 +55,31 @@ def main() -> None:
     p.add_argument("--warmup", type=int, default=2_000)
     p.add_argument("--measure", type=int, default=4_000)
     p.add_argument("--backend", choices=["auto", "gymnasium", "envpool"], default="auto")
+    p.add_argument("--cuda-graph", choices=["auto", "on", "off"], default="auto")
     p.add_argument("--top", type=int, default=30)
     p.add_argument("--name", help="result file (default: loop_profile_<algo>_<device>_e<E>)")
     args = p.parse_args()
 
-    from farsighter import make_config, train
+    from farsighter import train
 
     torch.set_num_threads(args.threads)
+    spec = {
+        "algo": args.algo,
+        "seed": 1,
+        "warmup": args.warmup,
+        "measure": args.measure,
+        "learning_starts": args.warmup,
+        "num_envs": args.num_envs,
+        "target_update_every": 1_000,
+        "buffer_size": 100_000,
+        "threads": args.threads,
+        "device": args.device,
+        "precision": args.precision,
+        "cuda_graph": args.cuda_graph,
+        "backend": args.backend,
+    }
     with tempfile.TemporaryDirectory() as tmp:
-        cfg = make_config(
-            args.algo,
-            ENV,
-            total_steps=args.warmup + args.measure,
-            learning_starts=args.warmup,
-            num_envs=args.num_envs,
-            train_every=TRAIN_EVERY,
-            eps_start=EPSILON,
-            eps_end=EPSILON,
-            eps_decay_steps=1,
-            buffer_size=100_000,
-            torch_threads=args.threads,
-            device=args.device,
-            precision=args.precision,
-            eval_every=0,
-            eval_episodes=1,
-            eval_max_steps=200,
-            checkpoint_every=0,
-            save_replay=False,
-            progress=False,
-            run_dir=f"{tmp}/run",
-            **{"atari.backend": args.backend},
-        )
+        cfg = steady_state_config(spec, f"{tmp}/run")
         window = ProfiledWindow(args.warmup, args.warmup + args.measure)
         train(cfg, callbacks=[window])
     assert window.first is not None and window.last is not None

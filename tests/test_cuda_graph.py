@@ -23,8 +23,8 @@ from farsighter.agents.cuda_graph import graphs_enabled, set_capturable
 from farsighter.config import validate
 from farsighter.errors import ConfigError
 from farsighter.ops.blr import BLRHead
-from farsighter.replay import VectorStep
 from tests.conftest import tiny
+from tests.test_farsighter_agent import feed as _feed
 
 CUDA = torch.cuda.is_available()
 
@@ -35,22 +35,6 @@ def _agent(tmp_path: Path, algo: str, device: str = "cpu", **kw: Any) -> Any:
     return build_agent(
         cfg, env.observation_space, env.action_space, frame_stack=1, device=torch.device(device)
     )
-
-
-def _feed(agent: Any, n: int, seed: int = 0) -> None:
-    rng = np.random.default_rng(seed)
-    for t in range(n):
-        end = t % 40 == 39
-        agent.observe(
-            VectorStep(
-                rng.normal(size=(1, 4)).astype(np.float32),
-                rng.integers(0, 2, size=1),
-                np.array([rng.normal()]),
-                np.array([end]),
-                np.array([False]),
-                [rng.normal(size=4).astype(np.float32)] if end else None,
-            )
-        )
 
 
 # ---------------------------------------------------------------------------------- any machine
