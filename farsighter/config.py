@@ -876,13 +876,8 @@ def _ob2i_rnd_checks(cfg: Config, spec: algorithms.Algorithm) -> list[tuple[bool
 
 
 GRAPH_AGENTS = ("ddqn", "farsighter")
-"""Agents whose update can be captured as a CUDA graph (farsighter.agents.cuda_graph)."""
-
-
-def graph_supported(cfg: Config, spec: algorithms.Algorithm) -> bool:
-    """Whether the update of ``spec``'s agent under ``cfg`` can be captured (its agent is one of
-    :data:`GRAPH_AGENTS`; OB2I, RND and NAF update eagerly)."""
-    return spec.agent in GRAPH_AGENTS
+"""Agents whose update can be captured as a CUDA graph (farsighter.agents.cuda_graph); OB2I, RND
+and NAF update eagerly."""
 
 
 def _algorithm_checks(cfg: Config, spec: algorithms.Algorithm) -> list[tuple[bool, str]]:
@@ -904,7 +899,7 @@ def _algorithm_checks(cfg: Config, spec: algorithms.Algorithm) -> list[tuple[boo
             "cuda_graph on needs a CUDA device (device cpu given); use auto or off",
         ),
         (
-            cfg.cuda_graph != "on" or graph_supported(cfg, spec),
+            cfg.cuda_graph != "on" or spec.agent in GRAPH_AGENTS,
             "cuda_graph on is supported by --algo "
             + ", ".join(a.name for a in algorithms.TABLE if a.agent in GRAPH_AGENTS)
             + "; use auto or off",

@@ -56,7 +56,7 @@ def train(cfg: Config, callbacks: Sequence[Callback] = ()) -> dict[str, Any]:
     ``callbacks`` see every vector step's ``info`` and the agent, read-only by contract."""
     validate(cfg)
     device = resolve_device(cfg.device)
-    graphs_enabled(cfg.cuda_graph, device, supported=True)  # cuda_graph on with no GPU: refused
+    graphs_enabled(cfg.cuda_graph, device)  # cuda_graph on with no GPU: refused
     envs: gym.vector.VectorEnv = make_vector_env(
         cfg, seed=cfg.seed
     )  # a bad id fails before the run dir is touched

@@ -102,9 +102,10 @@ def reset_step(step: StepFn) -> None:
         step.reset()
 
 
-def graphs_enabled(setting: str, device: torch.device | str, supported: bool) -> bool:
+def graphs_enabled(setting: str, device: torch.device | str, supported: bool = True) -> bool:
     """Whether an agent captures its update: ``on`` always (the config check refused it where the
-    update does not allow it), ``auto`` on CUDA when the update allows it, ``off`` never."""
+    update does not allow it), ``auto`` on CUDA when the update allows it, ``off`` never. A
+    ``cuda_graph on`` run on a device other than CUDA is refused (ConfigError)."""
     device = torch.device(device)
     if setting == "on" and device.type != "cuda":
         raise ConfigError(

@@ -64,7 +64,7 @@ class DDQNAgent:
         self.q_target.requires_grad_(False)
         self.opt = make_optimizer(self.q.parameters(), cfg)
         # The update as a CUDA graph on a GPU (cfg.cuda_graph; farsighter.agents.cuda_graph).
-        self.graphs = graphs_enabled(cfg.cuda_graph, device, supported=True)
+        self.graphs = graphs_enabled(cfg.cuda_graph, device)
         set_capturable(self.opt, self.graphs)
         self.step = wrap_step(self._step, self.graphs)
         self.replay = make_replay(cfg, obs_space, frame_stack, seed=cfg.seed + 1)

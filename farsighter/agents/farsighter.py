@@ -35,7 +35,6 @@ import numpy as np
 import torch
 from torch import nn
 
-from farsighter import algorithms
 from farsighter.agents.common import (
     Counters,
     TensorBatch,
@@ -52,6 +51,7 @@ from farsighter.agents.common import (
     save_state,
     sync_target,
     td_loss,
+    to_device,
     updates_owed,
 )
 from farsighter.agents.cuda_graph import (
@@ -62,7 +62,7 @@ from farsighter.agents.cuda_graph import (
     wrap_step,
 )
 from farsighter.agents.protocol import AgentFactory
-from farsighter.config import Config, graph_supported
+from farsighter.config import Config
 from farsighter.networks import make_torso
 from farsighter.ops.blr import BLRHead, greedy_predictive_variance
 from farsighter.ops.targets import double_q_target
@@ -121,8 +121,7 @@ class FarsighterAgent:
         # The update as a CUDA graph on a GPU (cfg.cuda_graph; farsighter.agents.cuda_graph).
         # What it reads between updates changes in place: torso parameters, the target torso
         # (load_state_dict copies), head.mean_AD and target_mean_AD (copied into).
-        supported = graph_supported(cfg, algorithms.get(cfg.algo))
-        self.graphs = graphs_enabled(cfg.cuda_graph, device, supported)
+        self.graphs = graphs_enabled(cfg.cuda_graph, device)
         set_capturable(self.opt, self.graphs)
         self.step = wrap_step(self._step, self.graphs)
         self.replay = make_replay(cfg, obs_space, frame_stack, seed=cfg.seed + 1)
@@ -270,13 +269,11 @@ class FarsighterAgent:
         if self.cfg.k_target == "max" and self.counters.k > 1:
             # The larger of the k-step and the one-step target of the same start (lower-bound
             # Q-learning, Tang 2020): see Config.k_target. Same s and a, so only s', r, gamma.
-            one = batch_tensors(
-                self.replay.gather(batch.env_index, batch.index, 1, self.cfg.gamma), self.device
-            )
+            one = self.replay.gather(batch.env_index, batch.index, 1, self.cfg.gamma)
             inputs.update(
-                one_next_obs_B=one.next_obs_B,
-                one_returns_B=one.returns_B,
-                one_bootstrap_B=one.bootstrap_B,
+                one_next_obs_B=obs_tensor(one.next_obs, self.device),
+                one_returns_B=to_device(one.returns, self.device),
+                one_bootstrap_B=to_device(one.bootstrap, self.device),
             )
         out = self.step({**inputs, **self._draws(len(batch.actions), "one_next_obs_B" in inputs)})
         if self.cfg.blr.mode == "incremental":
@@ -409,7 +406,7 @@ class FarsighterAgent:
     def load_state_dict(self, state: dict[str, Any]) -> None:
         load_state(self, self.SAVED, state)
         set_capturable(self.opt, self.graphs)
-        reset_step(self.step)  # target_mean_AD and the head's tensors were rebound
+        reset_step(self.step)  # the optimizer's state tensors are new ones
 
 
 AGENT: AgentFactory = (

@@ -27,13 +27,13 @@ What cannot be made identical is listed in :class:`EnvpoolAtariVector`'s docstri
 from __future__ import annotations
 
 import importlib.util
-import re
 import time
 from typing import Any
 
 import gymnasium as gym
 import numpy as np
 
+from farsighter.envs.atari import ale_name
 from farsighter.errors import EnvError
 
 ENVPOOL_EXTRA = "install the envpool extra: pip install 'farsighter[envpool]'"
@@ -60,12 +60,8 @@ def _atari_tasks() -> dict[str, str]:
 def envpool_task_id(env_id: str) -> str:
     """The envpool task of an ALE id: ``ALE/Breakout-v5`` and ``BreakoutNoFrameskip-v4`` ->
     ``Breakout-v5``. Raises a one-line :class:`EnvError` for a game envpool lacks."""
-    name = env_id.split(":")[-1]
-    if name.startswith("ALE/"):
-        game = re.sub(r"-v\d+$", "", name[len("ALE/") :])
-    elif "NoFrameskip" in name:
-        game = name.split("NoFrameskip")[0]
-    else:
+    game = ale_name(env_id)
+    if game is None:  # RAM observations (Breakout-ram-v5) are not ALE image ids either
         raise EnvError(
             f"'{env_id}' is not an ALE id (accepted: ALE/<Game>-v5 or <Game>NoFrameskip-v4)"
         )
@@ -73,7 +69,7 @@ def envpool_task_id(env_id: str) -> str:
         raise EnvError(f"the envpool Atari backend needs envpool; {ENVPOOL_EXTRA}")
     tasks = _atari_tasks()
     task = tasks.get(f"{game}-v5".lower())
-    if task is None or "-ram" in game.lower():
+    if task is None:
         raise EnvError(
             f"envpool has no Atari game '{game}' (from '{env_id}'; it has {len(tasks)} Atari "
             "games, e.g. Breakout-v5, Pong-v5); use the Gymnasium backend for this id"

@@ -588,7 +588,6 @@ class BLRHead:
         self._rebuild_cache()
 
 
-@torch.no_grad()
 def _in_place(cache: torch.Tensor | None, value: torch.Tensor) -> torch.Tensor:
     """``value`` as a contiguous float32 tensor, written into ``cache`` when it fits."""
     if cache is not None and cache.shape == value.shape and cache.device == value.device:
@@ -596,6 +595,7 @@ def _in_place(cache: torch.Tensor | None, value: torch.Tensor) -> torch.Tensor:
     return value.to(torch.float32).contiguous().clone()
 
 
+@torch.no_grad()
 def greedy_predictive_variance(head: BLRHead, phi_BD: torch.Tensor) -> float:
     """Q-variance for adaptive k (Alg. 1 line 7, SPEC 2.1).
 

@@ -23,7 +23,6 @@ from pathlib import Path
 from typing import Annotated, Any
 
 import numpy as np
-import tyro
 
 from farsighter.config import Config, is_minatar_id
 from farsighter.envs.atari import ATARI_49, TABLE2, ale_id, game_of
@@ -68,24 +67,20 @@ QUICK = StudyConfig(
 )
 
 
-def _hint(metavar: str) -> Any:
-    return tyro.conf.arg(metavar=metavar, help_behavior_hint="(default: the study's)")
-
-
 @dataclass(frozen=True)
 class Args(StudyArgs):
     """The flags of ``farsighter atari``: the shared ones and the study's."""
 
-    games: Annotated[tuple[str, ...] | None, _hint("GAME [GAME ...]")] = None
+    games: Annotated[tuple[str, ...] | None, runner.study_flag("GAME [GAME ...]")] = None
     """Games: Table 2 names (Breakout, MontezumaRevenge, ...), MinAtar/<Game>, or the groups
     'all' (Table 2's 49) and 'minatar' (MinAtar's five)."""
-    steps: Annotated[int | None, _hint("N")] = None
+    steps: Annotated[int | None, runner.study_flag("N")] = None
     """Agent steps of each run (an ALE step is 4 frames)."""
-    eval_every: Annotated[int | None, _hint("N")] = None
+    eval_every: Annotated[int | None, runner.study_flag("N")] = None
     """Steps between greedy evaluations (at most half of --steps)."""
-    eval_episodes: Annotated[int | None, _hint("N")] = None
+    eval_episodes: Annotated[int | None, runner.study_flag("N")] = None
     """Episodes of each evaluation."""
-    preset: Annotated[str | None, _hint("NAME")] = None
+    preset: Annotated[str | None, runner.study_flag("NAME")] = None
     """Preset of every run: auto (atari for ALE games, minatar for MinAtar), atari100k (the
     100k-step regime: schedules shrunk to the budget), or any of `farsighter presets`."""
 

@@ -21,7 +21,6 @@ from pathlib import Path
 from typing import Annotated, Any
 
 import numpy as np
-import tyro
 
 from farsighter.config import Config
 from farsighter.envs.chain import SOLVED_RETURN, chain_id
@@ -160,19 +159,15 @@ QUICK = StudyConfig(
 )
 
 
-def _hint(metavar: str) -> Any:
-    return tyro.conf.arg(metavar=metavar, help_behavior_hint="(default: the study's)")
-
-
 @dataclass(frozen=True)
 class Args(StudyArgs):
     """The flags of ``farsighter explore``: the shared ones and the suite's."""
 
-    steps: Annotated[int | None, _hint("N")] = None
+    steps: Annotated[int | None, runner.study_flag("N")] = None
     """Cap on every task's step budget (0: each task's own budget)."""
-    families: Annotated[tuple[str, ...] | None, _hint("NAME [NAME ...]")] = None
+    families: Annotated[tuple[str, ...] | None, runner.study_flag("NAME [NAME ...]")] = None
     """Task families: chain, doorkey, keycorridor, multiroom, mountaincar."""
-    sizes: Annotated[tuple[int, ...] | None, _hint("N [N ...]")] = None
+    sizes: Annotated[tuple[int, ...] | None, runner.study_flag("N [N ...]")] = None
     """Only these sizes of the chosen families (none given: every size)."""
 
 

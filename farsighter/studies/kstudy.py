@@ -23,7 +23,6 @@ from pathlib import Path
 from typing import Annotated, Any
 
 import numpy as np
-import tyro
 
 from farsighter.config import Config
 from farsighter.envs.maze import DEFAULT_MAX_EPISODE_STEPS, ENV_ID, SMALL_ENV_ID
@@ -95,17 +94,13 @@ class StudyConfig:
 QUICK = StudyConfig(seeds=(1, 2), steps=15_000, agents=("k=1", "k=10", ADAPTIVE))
 
 
-def _hint(metavar: str) -> Any:
-    return tyro.conf.arg(metavar=metavar, help_behavior_hint="(default: the study's)")
-
-
 @dataclass(frozen=True)
 class Args(StudyArgs):
     """The flags of ``farsighter k-study``: the shared ones and the study's."""
 
-    envs: Annotated[tuple[str, ...] | None, _hint("ENV [ENV ...]")] = None
+    envs: Annotated[tuple[str, ...] | None, runner.study_flag("ENV [ENV ...]")] = None
     """Gymnasium ids with discrete actions (the bridge maze runs with the maze study's preset)."""
-    steps: Annotated[int | None, _hint("N")] = None
+    steps: Annotated[int | None, runner.study_flag("N")] = None
     """Environment steps of each run, on every environment."""
 
 
@@ -241,10 +236,6 @@ def per_run(run: dict[str, Any], rule: Solved | None) -> dict[str, float]:
     }
 
 
-def _nanmean(x: np.ndarray) -> float:
-    return float(np.nanmean(x)) if np.isfinite(x).any() else float("nan")
-
-
 def summarise(runs: Runs) -> list[dict[str, Any]]:
     """One row per environment x agent (environments in the order they ran, agents in the study's
     order): the per-seed values (``"per_seed"``, which the claims compare) and their summaries."""
@@ -273,7 +264,7 @@ def summarise(runs: Runs) -> list[dict[str, Any]]:
                     "solved_seeds": int(np.nansum(solved)) if rule else "",
                     "solved_fraction": float(np.mean(solved)) if rule else float("nan"),
                     "solved_rule": rule.rule() if rule else "n/a",
-                    "final_k_mean": _nanmean(per_seed["final_k"]),
+                    "final_k_mean": runner.nanmean(per_seed["final_k"]),
                     "finals": " ".join(f"{v:g}" for v in per_seed["final"]),
                     "per_seed": per_seed,
                 }

@@ -190,11 +190,6 @@ def estimator(algo: str) -> str:
     return ESTIMATORS.get(algo, "n/a")
 
 
-def _nanmean(x: Sequence[float] | np.ndarray) -> float:
-    x = np.asarray(x, dtype=float)
-    return float(np.nanmean(x)) if np.isfinite(x).any() else float("nan")
-
-
 def _last_over_peak_one(curve: np.ndarray) -> float:
     """Final Q-variance / its peak for one seed (< 1: the variance shrank); NaN if undefined."""
     c = np.asarray(curve, dtype=float)
@@ -262,15 +257,15 @@ def summarise(runs: Runs, max_steps: int = DEFAULT_MAX_EPISODE_STEPS) -> list[di
                 "mean_abs_error": float(per_seed["abs_error"].mean()),
                 # the same estimator for every agent: the spread of the final Q(start) over seeds
                 "q_start_var_across_seeds": float(q.var()),
-                "own_uncertainty_at_start": _nanmean(per_seed["own_uncertainty_at_start"]),
+                "own_uncertainty_at_start": runner.nanmean(per_seed["own_uncertainty_at_start"]),
                 "estimator": estimator(str(items[0]["config"].get("algo", ""))),
                 "success_rate_last_quarter": float(np.mean(per_seed["success_last_quarter"])),
                 "final_eval_return": float(per_seed["final_eval_return"].mean()),
-                "steps_to_first_success": _nanmean(first),
+                "steps_to_first_success": runner.nanmean(first),
                 "seeds_with_success": int(np.isfinite(first).sum()),
                 "right_side_visit_fraction": float(np.mean(per_seed["right_side_fraction"])),
                 "greedy_success_seeds": int(per_seed["greedy_solved"].sum()),
-                "variance_last_over_peak": _nanmean(per_seed["variance_last_over_peak"]),
+                "variance_last_over_peak": runner.nanmean(per_seed["variance_last_over_peak"]),
                 "per_seed": per_seed,
             }
         )

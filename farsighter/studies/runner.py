@@ -103,6 +103,17 @@ def _flag(metavar: str, hint: str) -> Any:
 _STUDY_DEFAULT = "(default: the study's)"
 
 
+def study_flag(metavar: str) -> Any:
+    """A study flag whose default the study's config decides (its help says so)."""
+    return _flag(metavar, _STUDY_DEFAULT)
+
+
+def nanmean(x: Sequence[float] | np.ndarray) -> float:
+    """The mean of the finite values; NaN when there is none (without numpy's warning)."""
+    x = np.asarray(x, dtype=float)
+    return float(np.nanmean(x)) if np.isfinite(x).any() else float("nan")
+
+
 @dataclass(frozen=True)
 class StudyArgs:
     """The flags every study command shares (a study may add its own in a subclass)."""

@@ -26,7 +26,7 @@ import sys
 import time
 import traceback
 from collections import deque
-from collections.abc import Callable, MutableMapping, Sequence
+from collections.abc import Callable, Iterable, Mapping, MutableMapping, Sequence
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
@@ -66,7 +66,12 @@ class Backend:
             return f"{where}, {self.cpus:g} CPU + {self.gpus:g} GPU per run, {limit}"
         if self.workers == 1:
             return "this process"
-        return f"{self.workers or os.cpu_count() or 1} worker processes"
+        return f"{self.local_workers} worker processes"
+
+    @property
+    def local_workers(self) -> int:
+        """Worker processes of the local engine (``workers``, else one per CPU)."""
+        return self.workers or os.cpu_count() or 1
 
 
 class Progress:
@@ -125,6 +130,21 @@ def _say(bar: Any, message: str) -> None:
     bar.write(message, file=sys.stderr)
 
 
+def _failed(job: tuple[Any, ...], attempts: int, why: object) -> TrialError:
+    return TrialError(f"run {job[-1]} failed {attempts} times: {why}")
+
+
+def _show(
+    bar: Any,
+    done: int,
+    progress: Mapping[str, int],
+    running: Iterable[tuple[Any, ...]],
+) -> None:
+    """The bar at ``done`` finished steps plus the steps the running jobs report (-1: done)."""
+    bar.n = done + sum(max(progress.get(str(job[-1]), 0), 0) for job in running)
+    bar.refresh()
+
+
 def _in_process(
     fn: Callable[..., Any],
     jobs: Sequence[tuple[Any, ...]],
@@ -142,7 +162,7 @@ def _in_process(
                 raise
             except Exception as exc:
                 if attempt == backend.retries:
-                    raise TrialError(f"run {job[-1]} failed {attempt + 1} times: {exc}") from exc
+                    raise _failed(job, attempt + 1, exc) from exc
                 _say(bar, f"run {job[-1]} raised {exc!r}; restarting it ({attempt + 1})")
         bar.update(n)
 
@@ -176,7 +196,7 @@ def _on_processes(
     """Each job in its own spawned interpreter (nothing shared by accident, and a dead process
     harms no other job), ``workers`` at once, restarted when it dies or raises."""
     ctx = mp.get_context("spawn")
-    workers = backend.workers or os.cpu_count() or 1
+    workers = backend.local_workers
     with ctx.Manager() as manager:
         shared, errors = manager.dict(), manager.dict()
         todo: deque[int] = deque(range(len(jobs)))
@@ -210,12 +230,10 @@ def _on_processes(
                     )
                     if attempts[i] > backend.retries:
                         tail = message.strip().splitlines()[-1:] or [why]
-                        raise TrialError(f"run {jobs[i][-1]} failed {attempts[i]} times: {tail[0]}")
+                        raise _failed(jobs[i], attempts[i], tail[0])
                     _say(bar, f"run {jobs[i][-1]}: worker ended with {why}; restarting it")
                     todo.appendleft(i)
-                running_steps = sum(shared.get(str(jobs[i][-1]), 0) for i in running)
-                bar.n = done_before + finished + max(running_steps, 0)
-                bar.refresh()
+                _show(bar, done_before + finished, shared, (jobs[i] for i in running))
         finally:
             for proc in running.values():
                 proc.terminate()
@@ -305,22 +323,15 @@ def _on_ray(
                 i = in_flight.pop(ref)
                 try:
                     ray.get(ref)
-                except ray.exceptions.RayTaskError as exc:
-                    cause = exc.as_instanceof_cause()
+                except ray.exceptions.RayError as exc:
+                    task_error = isinstance(exc, ray.exceptions.RayTaskError)
+                    cause = exc.as_instanceof_cause() if task_error else exc
                     if isinstance(cause, FarsighterError):
                         raise FarsighterError(str(cause).splitlines()[-1]) from None
-                    raise TrialError(
-                        f"run {jobs[i][-1]} failed {backend.retries + 1} times: {cause}"
-                    ) from None
-                except ray.exceptions.RayError as exc:
-                    raise TrialError(
-                        f"run {jobs[i][-1]} failed {backend.retries + 1} times: {exc}"
-                    ) from None
+                    raise _failed(jobs[i], backend.retries + 1, cause) from None
                 finished += steps[i]
             current = ray.get(actor.get.remote())
-            running = sum(max(current.get(str(jobs[i][-1]), 0), 0) for i in in_flight.values())
-            bar.n = done_before + finished + running
-            bar.refresh()
+            _show(bar, done_before + finished, current, (jobs[i] for i in in_flight.values()))
     finally:
         for ref in in_flight:
             ray.cancel(ref, force=True)

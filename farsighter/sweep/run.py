@@ -87,7 +87,7 @@ def main(argv: Sequence[str]) -> int:
         gpus=res.gpus,
     )
     if args.dry_run:
-        todo = [t for t in spec.trials if not finished(out / "trials" / t.name)]
+        todo = unfinished(spec, out)
         for trial in spec.trials:
             state = "to run" if trial in todo else "finished"
             print(f"{trial.name}  ({trial.algo}, {_steps(trial):,} steps)  {state}")
@@ -117,6 +117,15 @@ def finished(run_dir: Path) -> bool:
     return (run_dir / SUMMARY_FILE).exists()
 
 
+def trial_dir(out: Path, trial: Trial) -> Path:
+    """The run directory of ``trial`` in the sweep directory ``out``."""
+    return out / "trials" / trial.name
+
+
+def unfinished(spec: SweepSpec, out: Path) -> list[Trial]:
+    return [t for t in spec.trials if not finished(trial_dir(out, t))]
+
+
 def run_sweep(
     spec: SweepSpec, out: Path, backend: Backend, show_progress: bool = True
 ) -> dict[str, Any]:
@@ -124,18 +133,19 @@ def run_sweep(
     unfinished ones resume from their checkpoints), then write the results; returns what the
     report says of the run (wall time, attempts)."""
     _prepare(spec, out)
-    todo = [t for t in spec.trials if not finished(out / "trials" / t.name)]
-    steps = [_steps(t) for t in todo]
+    todo = unfinished(spec, out)
+    budget = {t.name: _steps(t) for t in spec.trials}
+    steps = [budget[t.name] for t in todo]
     t0 = time.perf_counter()
     if todo:
         execute(
             run_trial,
-            [(trial, str(out / "trials" / trial.name)) for trial in todo],
+            [(trial, str(trial_dir(out, trial))) for trial in todo],
             steps=steps,
             backend=backend,
             desc=f"sweep {spec.name}",
             show_progress=show_progress,
-            done_before=sum(_steps(t) for t in spec.trials) - sum(steps),
+            done_before=sum(budget.values()) - sum(steps),
         )
     run = {
         "backend": backend.describe(),
@@ -205,7 +215,7 @@ def results(spec: SweepSpec, out: Path) -> list[dict[str, Any]]:
     """One row per finished trial, from its summary.json."""
     rows = []
     for trial in spec.trials:
-        path = out / "trials" / trial.name
+        path = trial_dir(out, trial)
         if not finished(path):
             continue
         summary = json.loads((path / SUMMARY_FILE).read_text())
@@ -291,37 +301,26 @@ _NORM_TEXT = {
 
 
 def _plot_curves(spec: SweepSpec, out: Path, file: Path) -> None:
-    import matplotlib
-
-    matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
-
     from farsighter.plots import read_csv
-    from farsighter.studies.runner import finish_axes
+    from farsighter.studies.runner import band, figure, finish_axes
 
     envs = list(dict.fromkeys(t.env for t in spec.trials))
-    fig, axes = plt.subplots(1, len(envs), figsize=(5 * len(envs), 3.6), squeeze=False)
-    for ax, env in zip(axes[0], envs, strict=True):
-        curves: dict[str, list[tuple[np.ndarray, np.ndarray]]] = {}
-        for trial in spec.trials:
-            path = out / "trials" / trial.name / EVAL_FILE
-            if trial.env != env or not path.exists():
-                continue
-            data = read_csv(path)
-            if len(data.get("global_step", [])):
-                curves.setdefault(variant(trial), []).append(
-                    (data["global_step"], data["eval_return_mean"])
-                )
-        for name, runs in curves.items():
-            n = min(len(x) for x, _ in runs)
-            x, ys = runs[0][0][:n], np.stack([y[:n] for _, y in runs])
-            mean, std = ys.mean(0), ys.std(0)
-            ax.plot(x, mean, label=name)
-            ax.fill_between(x, mean - std, mean + std, alpha=0.2)
-        finish_axes(ax, "environment steps", "evaluation return", env, fontsize=7)
-    fig.tight_layout()
-    fig.savefig(file, dpi=110)
-    plt.close(fig)
+    with figure(file, 1, len(envs), figsize=(5 * len(envs), 3.6), squeeze=False) as (_, axes):
+        for ax, env in zip(axes[0], envs, strict=True):
+            curves: dict[str, list[tuple[np.ndarray, np.ndarray]]] = {}
+            for trial in spec.trials:
+                path = trial_dir(out, trial) / EVAL_FILE
+                if trial.env != env or not path.exists():
+                    continue
+                data = read_csv(path)
+                if len(data.get("global_step", [])):
+                    curves.setdefault(variant(trial), []).append(
+                        (data["global_step"], data["eval_return_mean"])
+                    )
+            for name, runs in curves.items():
+                n = min(len(x) for x, _ in runs)
+                band(ax, runs[0][0][:n], np.stack([y[:n] for _, y in runs]), None, name)
+            finish_axes(ax, "environment steps", "evaluation return", env, fontsize=7)
 
 
 def _report(
@@ -332,6 +331,8 @@ def _report(
     how: str,
     run: dict[str, Any] | None,
 ) -> None:
+    from farsighter.studies.runner import markdown_table
+
     restarts = sum(max(r["attempts"] - 1, 0) for r in rows)
     lines = [
         f"# Sweep {spec.name}",
@@ -350,11 +351,12 @@ def _report(
     groups: dict[tuple[str, str], list[float]] = {}
     for r in rows:
         groups.setdefault((r["variant"], r["env"]), []).append(float(r["final_eval_return"]))
-    lines += ["| agent | environment | seeds | final return |", "|---|---|---|---|"]
+    cells = []
     for (name, env), values in groups.items():
         v = np.array(values)
         sd = v.std(ddof=1) if len(v) > 1 else 0.0
-        lines.append(f"| {name} | {env} | {len(v)} | {v.mean():.2f} ± {sd:.2f} |")
+        cells.append([name, env, str(len(v)), f"{v.mean():.2f} ± {sd:.2f}"])
+    lines.append(markdown_table(["agent", "environment", "seeds", "final return"], cells))
     if agg_md:
         lines += ["", f"## Across environments ({_NORM_TEXT[how]})", "", agg_md.strip()]
         lines += ["", "![aggregate](aggregate/figures/aggregate.png)"]
