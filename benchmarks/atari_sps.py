@@ -35,6 +35,7 @@ from __future__ import annotations
 import argparse
 import json
 import os
+import resource
 import statistics
 import subprocess
 import sys
@@ -83,6 +84,7 @@ class Window:
             "step": global_step,
             "wall": time.perf_counter(),
             "cpu": time.process_time(),
+            "faults": resource.getrusage(resource.RUSAGE_SELF).ru_minflt,
             "updates": c.updates,
             "target_syncs": c.target_syncs,
             "refreshes": None if head is None else head.num_refreshes,
@@ -171,6 +173,7 @@ def run_one(spec: dict[str, Any]) -> dict[str, Any]:
         "sps": round(steps / wall, 2),
         # process CPU seconds per wall second in the window (torch threads, envpool threads)
         "cpu_per_wall": round((last["cpu"] - first["cpu"]) / wall, 2),
+        "page_faults_per_step": round((last["faults"] - first["faults"]) / steps, 1),
         "updates_in_window": last["updates"] - first["updates"],
         "target_syncs_in_window": last["target_syncs"] - first["target_syncs"],
         "posterior_refreshes_in_window": refreshes,

@@ -18,6 +18,10 @@ step). Farsighter's extra cost per environment step, for one state: the acting f
 whole acting call from a numpy frame to a numpy action, beside DDQN's. ``--profile-steps`` whole
 updates also go through torch.profiler: the top operators by self CPU (and CUDA) time.
 
+The process keeps freed memory as training does (``farsighter.runtime.keep_heap``); ``--heap
+default`` measures with glibc's own thresholds, and ``page_faults_per_update`` shows the
+difference.
+
     python -m benchmarks.update_profile [--threads 2] [--device cpu|cuda] [--repeats 100]
 """
 
@@ -25,6 +29,7 @@ from __future__ import annotations
 
 import argparse
 import copy
+import resource
 import statistics
 import sys
 import time
@@ -42,10 +47,12 @@ from farsighter.agents.cuda_graph import GraphedStep, set_capturable
 from farsighter.networks import NatureCNN, set_precision
 from farsighter.ops.blr import BLRHead
 from farsighter.ops.targets import double_q_target
+from farsighter.runtime import keep_heap
 
 LAYOUTS = ("fp32_nchw", "fp32_channels_last", "bf16")
 ISSUE_MS = {"fp32_nchw": 20.3, "fp32_channels_last": 17.2, "bf16": 12.1}  # quiet, 2 threads
 BATCH = 32
+FAULT_UPDATES = 20  # updates over which page faults are counted
 FRAMES = (4, 84, 84)
 
 
@@ -131,6 +138,11 @@ def profile_layout(
         optimizer()
 
     whole = median_ms(update, sync, args.warmup, args.repeats)
+    faults0 = resource.getrusage(resource.RUSAGE_SELF).ru_minflt
+    for _ in range(FAULT_UPDATES):
+        update()
+    sync()
+    faults = (resource.getrusage(resource.RUSAGE_SELF).ru_minflt - faults0) / FAULT_UPDATES
     graphed = None
     if device.type == "cuda":  # the same update captured once and replayed (Config.cuda_graph)
 
@@ -211,6 +223,7 @@ def profile_layout(
     return {
         "update_ms": round(whole, 3),
         "update_ms_cuda_graph": graphed,
+        "page_faults_per_update": round(faults, 1),
         "phases_ms": phase_ms,
         "phases_sum_ms": round(sum(phase_ms.values()), 3),
         "per_step_extras_ms": extras,
@@ -264,9 +277,17 @@ def main() -> None:
     p.add_argument("--actions", type=int, default=4, help="Breakout's action set: 4")
     p.add_argument("--profile-steps", type=int, default=20, help="updates under torch.profiler")
     p.add_argument("--top", type=int, default=12, help="operators listed per layout")
+    p.add_argument(
+        "--heap",
+        choices=["keep", "default"],
+        default="keep",
+        help="keep: freed memory stays in the process, as in training (farsighter.runtime); "
+        "default: glibc's own thresholds",
+    )
     p.add_argument("--name", help="result file (default: update_profile, _gpu on CUDA)")
     args = p.parse_args()
     torch.set_num_threads(args.threads)
+    heap_kept = args.heap == "keep" and keep_heap()
     device = torch.device(args.device)
     if device.type == "cuda":
         if not torch.cuda.is_available():
@@ -295,6 +316,7 @@ def main() -> None:
         "warmup": args.warmup,
         "repeats": args.repeats,
         "statistic": "median ms",
+        "heap": "kept (farsighter.runtime.keep_heap)" if heap_kept else "glibc default",
         "update_ms": {k: v["update_ms"] for k, v in layouts.items()},
         "update_ms_cuda_graph": {k: v["update_ms_cuda_graph"] for k, v in layouts.items()},
         "speedup_over_fp32_nchw": speedup,
@@ -309,6 +331,9 @@ def main() -> None:
             "per_step_extras_ms: one state (E = 1); farsighter_extra_per_step = "
             "farsighter_act_total - ddqn_act_total, paid at every environment step (an update "
             "comes every 4)",
+            f"page_faults_per_update: minor page faults of the process over {FAULT_UPDATES} "
+            "whole updates after the timed ones (memory the allocator had given back and "
+            "touched again)",
             "the Thompson draw runs at the prior covariance (dense, as after a refresh): its "
             "cost does not depend on the values",
         ],

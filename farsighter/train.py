@@ -17,6 +17,7 @@ from farsighter.envs import check_spaces, frame_stack_of, make_env, make_vector_
 from farsighter.errors import ConfigError, RunDirError
 from farsighter.replay import VectorStep
 from farsighter.rundir import CONFIG_FILE, load_checkpoint, prepare_run_dir
+from farsighter.runtime import prepare_process
 from farsighter.session import (
     EvalResult,
     LoopState,
@@ -63,8 +64,7 @@ def train(cfg: Config, callbacks: Sequence[Callback] = ()) -> dict[str, Any]:
     obs_space, act_space = envs.single_observation_space, envs.single_action_space
     check_spaces(cfg.algo, obs_space, act_space)
     path = prepare_run_dir(cfg)
-    if cfg.torch_threads:
-        torch.set_num_threads(cfg.torch_threads)
+    prepare_process(cfg.torch_threads)
     agent = build_agent(cfg, obs_space, act_space, frame_stack=frame_stack_of(cfg), device=device)
     if cfg.resume:
         state, envs, obs = restore_run(path, cfg, agent, envs)
