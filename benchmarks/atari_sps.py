@@ -125,6 +125,7 @@ def steady_state_config(spec: dict[str, Any], run_dir: str) -> Config:
         device=spec["device"],
         precision=spec["precision"],
         cuda_graph=spec.get("cuda_graph", "auto"),
+        compile=spec.get("compile", False),
         eval_every=0,
         eval_episodes=1,  # the final evaluation is outside the window; keep it short
         eval_max_steps=200,
@@ -162,6 +163,7 @@ def run_one(spec: dict[str, Any]) -> dict[str, Any]:
         "num_envs": spec["num_envs"],
         "precision": spec["precision"],
         "cuda_graph": cfg.cuda_graph,
+        "compile": cfg.compile,
         "threads": torch.get_num_threads(),
         "device": spec["device"],
         "backend": backend,
@@ -425,6 +427,13 @@ def parse_args() -> argparse.Namespace:
         choices=["auto", "gymnasium", "envpool"],
         help="Atari backend (default: gymnasium on CPU, as CleanRL steps; envpool on CUDA)",
     )
+    p.add_argument(
+        "--compile",
+        nargs="+",
+        choices=["off", "on"],
+        default=["off"],
+        help="Config.compile: measure eager, compiled, or both (table keys end in _compiled)",
+    )
     p.add_argument("--repeats", type=int, default=1, help="rounds over all configurations")
     p.add_argument("--seed", type=int, default=1)
     p.add_argument("--cleanrl", type=Path, help="CleanRL checkout to measure beside ours")
@@ -472,11 +481,20 @@ def main() -> None:
         "seed": args.seed,
         "cuda_graph": args.cuda_graph,
     }
+    compiled = [c == "on" for c in args.compile]
     configs = [
-        {**base, "algo": a, "num_envs": e, "precision": p, "buffer_size": SPEED_BUFFER}
+        {
+            **base,
+            "algo": a,
+            "num_envs": e,
+            "precision": p,
+            "compile": c,
+            "buffer_size": SPEED_BUFFER,
+        }
         for a in args.algos
         for e in num_envs
         for p in args.precision
+        for c in compiled
     ]
     rows: list[dict[str, Any]] = []
     cleanrl_rows: list[dict[str, Any]] = []
@@ -497,6 +515,7 @@ def main() -> None:
             print(f"  {cleanrl_rows[-1]['sps']} steps/s", file=sys.stderr, flush=True)
         for spec in configs:
             label = f"{spec['algo']} E={spec['num_envs']} {spec['precision']}"
+            label += " compiled" if spec["compile"] else ""
             print(f"[round {rnd + 1}] {label}", file=sys.stderr, flush=True)
             rows.append({**measure(spec), "round": rnd + 1})
             print(f"  {rows[-1]['sps']} steps/s", file=sys.stderr, flush=True)
@@ -530,19 +549,29 @@ def main() -> None:
             "raw": row,
         }
 
-    def pick(algo: str, e: int, precision: str) -> list[dict[str, Any]]:
+    def pick(algo: str, e: int, precision: str, c: bool = False) -> list[dict[str, Any]]:
         return [
             r
             for r in rows
-            if r["algo"] == algo and r["num_envs"] == e and r["precision"] == precision
+            if r["algo"] == algo
+            and r["num_envs"] == e
+            and r["precision"] == precision
+            and r["compile"] == c
         ]
 
     table = {
-        a: {f"E{e}_{p}": median_sps(pick(a, e, p)) for e in num_envs for p in args.precision}
+        a: {
+            f"E{e}_{p}" + ("_compiled" if c else ""): median_sps(pick(a, e, p, c))
+            for e in num_envs
+            for p in args.precision
+            for c in compiled
+        }
         for a in args.algos
     }
     fars_fp32 = median_sps(pick("farsighter", 1, "fp32"))
     fars_bf16 = median_sps(pick("farsighter", 1, "bf16"))
+    fars_fp32_c = median_sps(pick("farsighter", 1, "fp32", True))
+    fars_bf16_c = median_sps(pick("farsighter", 1, "bf16", True))
     cleanrl = median_sps(cleanrl_rows)
     figures: dict[str, Any] = {"env": ENV, "device": args.device}
     if gpu:
@@ -563,6 +592,8 @@ def main() -> None:
             "cleanrl_dqn_sps": cleanrl,
             "farsighter_over_cleanrl": ratio(fars_fp32, cleanrl),
             "farsighter_bf16_over_cleanrl": ratio(fars_bf16, cleanrl),
+            "farsighter_compiled_over_cleanrl": ratio(fars_fp32_c, cleanrl),
+            "farsighter_bf16_compiled_over_cleanrl": ratio(fars_bf16_c, cleanrl),
             "goal_fp32_ratio": GOAL_FP32_RATIO,
             "goal_bf16_ratio": GOAL_BF16_RATIO,
             "sps_table": table,
@@ -581,6 +612,7 @@ def main() -> None:
                 "buffer_size": SPEED_BUFFER,
                 "backend": backend,
                 "cuda_graph": args.cuda_graph,
+                "compile": args.compile,
                 "repeats": args.repeats,
                 "seed": args.seed,
                 "statistic": "median over rounds",
@@ -612,6 +644,12 @@ def main() -> None:
     if not gpu:
         figures["meets_fp32_goal"] = meets(figures["farsighter_over_cleanrl"], GOAL_FP32_RATIO)
         figures["meets_bf16_goal"] = meets(figures["farsighter_bf16_over_cleanrl"], GOAL_BF16_RATIO)
+        figures["meets_fp32_goal_compiled"] = meets(
+            figures["farsighter_compiled_over_cleanrl"], GOAL_FP32_RATIO
+        )
+        figures["meets_bf16_goal_compiled"] = meets(
+            figures["farsighter_bf16_compiled_over_cleanrl"], GOAL_BF16_RATIO
+        )
     name = args.name or ("atari_sps_gpu" if gpu else "atari_sps")
     print(f"wrote {write_result(name, figures)}", file=sys.stderr)
 

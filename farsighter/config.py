@@ -276,7 +276,14 @@ class Config:
     each update, so the host launches it once instead of kernel by kernel
     (farsighter.agents.cuda_graph). auto: on a CUDA device, for the agents whose update allows
     it (ddqn, kddqn, bdqn, farsighter); on: insist (refused for the others, and on CPU); off:
-    eager. The updates are the same either way."""
+    eager. The updates are the same either way. Off when compile is on."""
+    compile: bool = False
+    """torch.compile the update step (forward, target, loss, backward, clip, optimizer) of
+    ddqn, kddqn, bdqn and farsighter (farsighter.agents.cuda_graph.wrap_step): fused
+    element-wise work, on CPU in C++. The first update compiles (about 20 s on a 2-core CPU; a
+    few seconds once the kernels are in Inductor's disk cache), and a CPU needs a C++ compiler.
+    The math is the same; the float rounding differs from eager. Measured and tested on CPU;
+    docs/design.md gives its speed."""
     resume: bool = False
     """Continue the run in run_dir from its last checkpoint."""
     overwrite: bool = False
@@ -875,15 +882,16 @@ def _ob2i_rnd_checks(cfg: Config, spec: algorithms.Algorithm) -> list[tuple[bool
     ]
 
 
-GRAPH_AGENTS = ("ddqn", "farsighter")
-"""Agents whose update can be captured as a CUDA graph (farsighter.agents.cuda_graph); OB2I, RND
-and NAF update eagerly."""
+STEP_AGENTS = ("ddqn", "farsighter")
+"""Agents whose update is one step function that can be captured as a CUDA graph or compiled
+(farsighter.agents.cuda_graph); OB2I, RND and NAF update eagerly."""
 
 
 def _algorithm_checks(cfg: Config, spec: algorithms.Algorithm) -> list[tuple[bool, str]]:
     """What the algorithm table allows, and the device."""
     adaptive = " and ".join(a.name for a in algorithms.TABLE if a.adaptive_k)
     device_ok = cfg.device in ("auto", "cpu", "cuda") or cfg.device.startswith("cuda:")
+    step_algos = ", ".join(a.name for a in algorithms.TABLE if a.agent in STEP_AGENTS)
     return [
         (
             not cfg.adaptive_k.enabled or spec.adaptive_k,
@@ -899,10 +907,16 @@ def _algorithm_checks(cfg: Config, spec: algorithms.Algorithm) -> list[tuple[boo
             "cuda_graph on needs a CUDA device (device cpu given); use auto or off",
         ),
         (
-            cfg.cuda_graph != "on" or spec.agent in GRAPH_AGENTS,
-            "cuda_graph on is supported by --algo "
-            + ", ".join(a.name for a in algorithms.TABLE if a.agent in GRAPH_AGENTS)
-            + "; use auto or off",
+            cfg.cuda_graph != "on" or spec.agent in STEP_AGENTS,
+            f"cuda_graph on is supported by --algo {step_algos}; use auto or off",
+        ),
+        (
+            not cfg.compile or spec.agent in STEP_AGENTS,
+            f"compile is supported by --algo {step_algos}",
+        ),
+        (
+            not (cfg.compile and cfg.cuda_graph == "on"),
+            "compile and cuda_graph on do not combine; use cuda_graph auto or off with compile",
         ),
         (
             cfg.k_target == "k" or spec.agent == "farsighter",

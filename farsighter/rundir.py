@@ -45,6 +45,7 @@ RESUMABLE_FIELDS = {
     "total_steps",
     "device",
     "cuda_graph",
+    "compile",
     "progress",
     "run_dir",
     "torch_threads",

@@ -11,7 +11,7 @@ import numpy as np
 import torch
 
 from farsighter.agents import Agent, build_agent
-from farsighter.agents.cuda_graph import graphs_enabled
+from farsighter.agents.cuda_graph import check_compiler, graphs_enabled
 from farsighter.config import Config, load_config, validate
 from farsighter.envs import check_spaces, frame_stack_of, make_env, make_vector_env
 from farsighter.errors import ConfigError, RunDirError
@@ -58,6 +58,7 @@ def train(cfg: Config, callbacks: Sequence[Callback] = ()) -> dict[str, Any]:
     validate(cfg)
     device = resolve_device(cfg.device)
     graphs_enabled(cfg.cuda_graph, device)  # cuda_graph on with no GPU: refused
+    check_compiler(cfg.compile, device)  # compile on a CPU without a C++ compiler: refused
     envs: gym.vector.VectorEnv = make_vector_env(
         cfg, seed=cfg.seed
     )  # a bad id fails before the run dir is touched

@@ -95,6 +95,13 @@ def test_agents_are_one_config_each_on_the_auto_preset(tmp_path: Path) -> None:
         "RND",
     ]
     by = {a.label: a for a in AGENTS}
+    # the default list trains no config twice
+    assert "Farsighter (redraw step)" not in StudyConfig().agents
+    configs = [
+        run_config(by[label], QUICK, 3, tmp_path, (chain_id(10), 10_000))
+        for label in StudyConfig().agents
+    ]
+    assert len({repr(dataclasses.replace(c, run_dir="")) for c in configs}) == len(configs)
     assert by["Farsighter"].overrides == {} and by["DDQN"].overrides == {}
     assert by["Farsighter (redraw k)"].overrides == {"blr.redraw": "k"}
     cfg = run_config(by["Farsighter (redraw step)"], QUICK, 3, tmp_path, (chain_id(10), 10_000))
@@ -155,7 +162,8 @@ def test_settings_round_trip_and_the_command_line(tmp_path: Path) -> None:
         str(tmp_path),
     ]
     assert settings_from(STUDY, parse(STUDY, ["--quick"])) == QUICK
-    assert settings_from(STUDY, parse(STUDY, ["--agents", "all"])) == StudyConfig()
+    every = settings_from(STUDY, parse(STUDY, ["--agents", "all"]))  # the alias included
+    assert every == dataclasses.replace(StudyConfig(), agents=tuple(a.label for a in AGENTS))
 
 
 # ------------------------------------------------------------------------------------------------

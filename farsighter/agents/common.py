@@ -100,11 +100,14 @@ class TensorBatch:
 
     def tensors(self) -> dict[str, torch.Tensor]:
         """The fields by name (a captured step's inputs; :meth:`of` reads them back)."""
-        return {f.name: getattr(self, f.name) for f in dataclasses.fields(self)}
+        return {name: getattr(self, name) for name in _BATCH_FIELDS}
 
     @classmethod
     def of(cls, tensors: dict[str, torch.Tensor]) -> TensorBatch:
-        return cls(**{f.name: tensors[f.name] for f in dataclasses.fields(cls)})
+        return cls(**{name: tensors[name] for name in _BATCH_FIELDS})
+
+
+_BATCH_FIELDS = tuple(f.name for f in dataclasses.fields(TensorBatch))  # (torch.compile traces it)
 
 
 def batch_tensors(batch: Batch, device: torch.device) -> TensorBatch:

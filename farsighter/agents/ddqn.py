@@ -63,10 +63,11 @@ class DDQNAgent:
         self.q_target = copy.deepcopy(self.q)
         self.q_target.requires_grad_(False)
         self.opt = make_optimizer(self.q.parameters(), cfg)
-        # The update as a CUDA graph on a GPU (cfg.cuda_graph; farsighter.agents.cuda_graph).
-        self.graphs = graphs_enabled(cfg.cuda_graph, device)
+        # The update as a CUDA graph on a GPU (cfg.cuda_graph), or compiled (cfg.compile):
+        # farsighter.agents.cuda_graph.
+        self.graphs = graphs_enabled(cfg.cuda_graph, device, supported=not cfg.compile)
         set_capturable(self.opt, self.graphs)
-        self.step = wrap_step(self._step, self.graphs)
+        self.step = wrap_step(self._step, self.graphs, cfg.compile)
         self.replay = make_replay(cfg, obs_space, frame_stack, seed=cfg.seed + 1)
         self.rng = np.random.default_rng(cfg.seed + 2)
         self.counters = Counters(k=cfg.k)

@@ -118,12 +118,13 @@ class FarsighterAgent:
         self.head.set_mean(init_AD.to(device))
         self.target_mean_AD = self.head.mean_AD.clone()
         self.opt = make_optimizer(self.torso.parameters(), cfg)
-        # The update as a CUDA graph on a GPU (cfg.cuda_graph; farsighter.agents.cuda_graph).
+        # The update as a CUDA graph on a GPU (cfg.cuda_graph), or compiled (cfg.compile):
+        # farsighter.agents.cuda_graph.
         # What it reads between updates changes in place: torso parameters, the target torso
         # (load_state_dict copies), head.mean_AD and target_mean_AD (copied into).
-        self.graphs = graphs_enabled(cfg.cuda_graph, device)
+        self.graphs = graphs_enabled(cfg.cuda_graph, device, supported=not cfg.compile)
         set_capturable(self.opt, self.graphs)
-        self.step = wrap_step(self._step, self.graphs)
+        self.step = wrap_step(self._step, self.graphs, cfg.compile)
         self.replay = make_replay(cfg, obs_space, frame_stack, seed=cfg.seed + 1)
         self.rng = np.random.default_rng(cfg.seed + 2)
         self.gen = torch.Generator(device=device)

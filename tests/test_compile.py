@@ -1,0 +1,68 @@
+"""Config.compile: the update step compiled by torch.compile (farsighter.agents.cuda_graph).
+
+A compiled agent makes the same updates as an eager one (to float rounding), repeats itself
+exactly for a fixed seed, and a second agent in the same process reuses the compiled code."""
+
+from __future__ import annotations
+
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+import pytest
+import torch
+
+from farsighter import make_config
+from farsighter.agents.cuda_graph import check_compiler
+from farsighter.config import validate
+from farsighter.errors import ConfigError
+from tests.test_cuda_graph import _agent, _params
+from tests.test_farsighter_agent import feed as _feed
+
+
+def test_compile_setting_is_checked(monkeypatch: pytest.MonkeyPatch) -> None:
+    with pytest.raises(ConfigError, match="compile is supported by"):
+        validate(make_config("ob2i", "CartPole-v1", compile=True))
+    with pytest.raises(ConfigError, match="do not combine"):
+        validate(make_config("ddqn", "CartPole-v1", compile=True, cuda_graph="on"))
+    validate(make_config("farsighter", "CartPole-v1", compile=True))
+    monkeypatch.setattr("shutil.which", lambda name: None)
+    with pytest.raises(ConfigError, match="needs a C\\+\\+ compiler"):
+        check_compiler(True, "cpu")
+    check_compiler(False, "cpu")
+
+
+def _run(tmp_path: Path, algo: str, compiled: bool, **kw: Any) -> tuple[Any, list[float]]:
+    agent = _agent(
+        tmp_path, algo, compile=compiled, target_update_every=25, blr__posterior_every=40, **kw
+    )
+    _feed(agent, 300)
+    losses = []
+    for step in range(1, 121):  # 60 updates, target copies and (farsighter) refreshes
+        m = agent.learn(step)
+        if "td_loss" in m:
+            losses.append(float(m["td_loss"]))
+    return agent, losses
+
+
+@pytest.mark.parametrize(
+    ("algo", "extra"),
+    [
+        ("ddqn", {}),
+        ("farsighter", {"k_target": "max", "blr__target": "sample"}),
+    ],
+)
+def test_compiled_updates_equal_eager_updates(
+    tmp_path: Path, algo: str, extra: dict[str, Any]
+) -> None:
+    eager, eager_losses = _run(tmp_path / "eager", algo, False, **extra)
+    first, first_losses = _run(tmp_path / "c1", algo, True, **extra)
+    second, second_losses = _run(tmp_path / "c2", algo, True, **extra)
+    assert hasattr(first.step, "_torchdynamo_orig_callable")  # the step is compiled
+    np.testing.assert_allclose(first_losses, eager_losses, rtol=1e-4, atol=1e-6)
+    for a, b in zip(_params(first), _params(eager), strict=True):
+        torch.testing.assert_close(a, b, rtol=1e-4, atol=1e-5)
+    # a fixed seed repeats exactly, and the second agent ran on the code compiled for the first
+    assert second_losses == first_losses
+    for a, b in zip(_params(second), _params(first), strict=True):
+        torch.testing.assert_close(a, b, rtol=0, atol=0)
