@@ -66,3 +66,19 @@ def test_compiled_updates_equal_eager_updates(
     assert second_losses == first_losses
     for a, b in zip(_params(second), _params(first), strict=True):
         torch.testing.assert_close(a, b, rtol=0, atol=0)
+
+
+def test_a_compiled_run_trains_checkpoints_and_resumes(tmp_path: Path) -> None:
+    """The whole loop with --compile: training, evaluation, checkpoints and a resume, whose
+    continuation equals the uninterrupted compiled run's."""
+    from farsighter import load_agent, train
+    from tests.conftest import tiny
+
+    full = train(tiny("farsighter", tmp_path / "full", compile=True))
+    train(tiny("farsighter", tmp_path / "cut", compile=True, total_steps=1_000))
+    resumed = train(tiny("farsighter", tmp_path / "cut", compile=True, resume=True))
+    assert full["global_step"] == resumed["global_step"] == 1_500
+    assert resumed["final_eval_return"] == full["final_eval_return"]
+    a, b = (load_agent(tmp_path / d).agent.torso.state_dict() for d in ("full", "cut"))
+    for name in a:
+        torch.testing.assert_close(a[name], b[name], rtol=0, atol=0)
