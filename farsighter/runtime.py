@@ -2,16 +2,15 @@
 
 **The heap.** glibc's ``malloc`` serves blocks above a threshold with ``mmap`` and gives them back
 to the operating system on ``free``, and it trims the top of the heap once enough of it is free.
-An update on the CPU
-allocates and frees the same few megabytes of activations and gradients every time (torch keeps
-no cache of CPU memory), so the training loop kept faulting the same pages in again: 180 to 290
-minor page faults per environment step in fp32 and 710 to 850 with bf16 on Breakout.
-:func:`keep_heap` raises both thresholds once (``mallopt``), so freed blocks stay in the process
-and are reused: 1 to 2 faults per step, and Farsighter's steps/s on Breakout (E = 1, 2 threads)
-went from 135.7 to 150.2 in fp32 and from 147.1 to 178.5 with bf16 (medians of three
-interleaved rounds, ``benchmarks/results/keep_heap_ab.json``). It changes no result, only where
-freed memory waits; the process holds its peak working set, as it would at the peak anyway.
-Other C libraries (musl, macOS, Windows) are left alone.
+An update on the CPU allocates and frees the same few megabytes of activations and gradients
+every time (torch keeps no cache of CPU memory), so the training loop kept faulting the same
+pages in again: 180 to 290 minor page faults per environment step in fp32 and 710 to 850 with
+bf16 on Breakout. :func:`keep_heap` raises both thresholds once (``mallopt``), so freed blocks
+stay in the process and are reused: 1 to 2 faults per step, and Farsighter's steps/s on
+Breakout (E = 1, 2 threads) went from 135.7 to 150.2 in fp32 and from 147.1 to 178.5 with bf16
+(medians of three interleaved rounds, ``benchmarks/results/keep_heap_ab.json``). It changes no
+result, only where freed memory waits; peak RSS with a 1M buffer stayed at 515 MB
+(``atari_sps_memory.json``). Other C libraries (musl, macOS, Windows) are left alone.
 """
 
 from __future__ import annotations
