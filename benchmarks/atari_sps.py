@@ -19,7 +19,11 @@ and the peak RSS (``ru_maxrss`` of that process) do not leak from one to the nex
 adds one Farsighter run with a ``--buffer-size`` (1M) replay: RSS counts only the pages touched,
 so the JSON also gives the replay's allocated bytes.
 
-    python -m benchmarks.atari_sps [--cleanrl DIR] [--precision fp32 bf16] [--memory]
+``--compile off on`` measures each configuration eager and with ``Config.compile`` (the first
+update compiles inside the warm-up, outside the window). Every measurement records its minor
+page faults per step (``page_faults_per_step``).
+
+    python -m benchmarks.atari_sps [--cleanrl DIR] [--precision fp32 bf16] [--compile off on]
     python -m benchmarks.atari_sps --device cuda --cleanrl DIR      # -> atari_sps_gpu.json
 
 CleanRL reference (``--cleanrl DIR``, a checkout holding ``cleanrl/dqn_atari.py`` and
