@@ -178,3 +178,17 @@ def test_atari_sweeps_are_human_normalised() -> None:
     table, envs = score_table(rows, "human")
     assert envs == ["ALE/Breakout-v5"]
     assert table["a"][:, 0].tolist() == pytest.approx([0.0, 1.0])
+
+
+def test_the_progress_bar_counts_a_job_that_reported_done_while_it_exits() -> None:
+    from types import SimpleNamespace
+
+    from farsighter.sweep.engine import _show
+
+    bar = SimpleNamespace(n=0, refresh=lambda: None)
+    jobs = [("a",), ("b",), ("c",)]
+    # a: finished and reaped (in done); b: reported done, its process still ending; c: running
+    _show(bar, 600, {"a": -1, "b": -1, "c": 250}, [(jobs[1], 600), (jobs[2], 600)])
+    assert bar.n == 600 + 600 + 250
+    _show(bar, 600, {}, [(jobs[1], 600)])  # nothing reported yet
+    assert bar.n == 600

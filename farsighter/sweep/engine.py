@@ -138,10 +138,14 @@ def _show(
     bar: Any,
     done: int,
     progress: Mapping[str, int],
-    running: Iterable[tuple[Any, ...]],
+    running: Iterable[tuple[tuple[Any, ...], int]],
 ) -> None:
-    """The bar at ``done`` finished steps plus the steps the running jobs report (-1: done)."""
-    bar.n = done + sum(max(progress.get(str(job[-1]), 0), 0) for job in running)
+    """The bar at ``done`` finished steps plus the steps the running ``(job, steps)`` report; a
+    job that reported -1 (done) while its process is still ending counts all its steps."""
+    bar.n = done + sum(
+        steps if (reported := progress.get(str(job[-1]), 0)) < 0 else reported
+        for job, steps in running
+    )
     bar.refresh()
 
 
@@ -233,7 +237,7 @@ def _on_processes(
                         raise _failed(jobs[i], attempts[i], tail[0])
                     _say(bar, f"run {jobs[i][-1]}: worker ended with {why}; restarting it")
                     todo.appendleft(i)
-                _show(bar, done_before + finished, shared, (jobs[i] for i in running))
+                _show(bar, done_before + finished, shared, ((jobs[i], steps[i]) for i in running))
         finally:
             for proc in running.values():
                 proc.terminate()
@@ -331,7 +335,8 @@ def _on_ray(
                     raise _failed(jobs[i], backend.retries + 1, cause) from None
                 finished += steps[i]
             current = ray.get(actor.get.remote())
-            _show(bar, done_before + finished, current, (jobs[i] for i in in_flight.values()))
+            running = ((jobs[i], steps[i]) for i in in_flight.values())
+            _show(bar, done_before + finished, current, running)
     finally:
         for ref in in_flight:
             ray.cancel(ref, force=True)
