@@ -10,6 +10,7 @@ from pathlib import Path
 
 import numpy as np
 import pytest
+import torch
 
 from farsighter.cli import main
 from farsighter.config import make_config, resolve_preset_name
@@ -75,6 +76,18 @@ def test_each_suite_gets_its_preset(tmp_path: Path) -> None:
     assert long.buffer_size == make_config("farsighter", "ALE/Pong-v5").buffer_size
 
 
+def test_device_threads_precision_and_compile_reach_every_run(tmp_path: Path) -> None:
+    study = StudyConfig(games=("Pong",), device="cuda:1", threads=4, precision="bf16", compile=True)
+    task = tasks(study)[0]
+    for agent in AGENTS:
+        cfg = run_config(agent, study, 1, tmp_path, task)
+        assert (cfg.device, cfg.torch_threads, cfg.precision) == ("cuda:1", 4, "bf16")
+        assert cfg.compile == (agent.label != "OB2I")  # OB2I's update is not one step function
+    default = run_config(AGENTS[2], StudyConfig(), 1, tmp_path, task)
+    assert (default.device, default.torch_threads, default.precision) == ("cpu", 1, "fp32")
+    assert default.compile is False
+
+
 def _run(task: str, seed: int, finals: list[float]) -> dict[str, object]:
     steps = np.arange(1, len(finals) + 1) * 1_000.0
     return {
@@ -133,6 +146,10 @@ BAD = [
     ("--agents Rainbow", "unknown atari agent(s) ['Rainbow']"),
     ("--eval-episodes 0", "--eval-episodes must be >= 1"),
     ("--steps 0", "--steps must be >= 1"),
+    ("--threads 0", "--threads must be >= 1"),
+    ("--precision fp16", "--precision must be fp32 or bf16"),
+    *([] if torch.cuda.is_available() else [("--device cuda", "CUDA is not available")]),
+    ("--device tpu", "unknown device 'tpu'"),
 ]
 
 

@@ -24,7 +24,8 @@ from typing import Annotated, Any
 
 import numpy as np
 
-from farsighter.config import Config, is_minatar_id
+from farsighter import algorithms
+from farsighter.config import STEP_AGENTS, Config, is_minatar_id
 from farsighter.envs.atari import ATARI_49, TABLE2, ale_id, game_of
 from farsighter.envs.atari_scores import human_normalized
 from farsighter.envs.minatar import MINATAR_GAMES, minatar_id
@@ -55,6 +56,10 @@ class StudyConfig:
     workers: int = 0  # 0: one per core
     agents: tuple[str, ...] = ("DDQN", "BDQN", "Farsighter", "OB2I")
     preset: str = "auto"  # auto: atari for ALE games, minatar for MinAtar
+    device: str = "cpu"  # where every run trains: cpu, cuda or cuda:N (workers share a GPU)
+    threads: int = 1  # torch threads of each run
+    precision: str = "fp32"  # Config.precision of every run
+    compile: bool = False  # Config.compile of the agents that support it
 
 
 QUICK = StudyConfig(
@@ -83,6 +88,16 @@ class Args(StudyArgs):
     preset: Annotated[str | None, runner.study_flag("NAME")] = None
     """Preset of every run: auto (atari for ALE games, minatar for MinAtar), atari100k (the
     100k-step regime: schedules shrunk to the budget), or any of `farsighter presets`."""
+    device: Annotated[str | None, runner.study_flag("DEVICE")] = None
+    """Where every run trains: cpu, cuda or cuda:N (the worker processes share the GPU; on a GPU
+    the updates of DDQN, BDQN and Farsighter run as CUDA graphs)."""
+    threads: Annotated[int | None, runner.study_flag("N")] = None
+    """torch threads of each run (each worker process runs one run at a time)."""
+    precision: Annotated[str | None, runner.study_flag("fp32|bf16")] = None
+    """Arithmetic of the torsos (Config.precision): fp32, or bf16 autocast."""
+    compile: Annotated[bool | None, runner.study_flag("")] = None
+    """torch.compile the updates (Config.compile) of the agents that support it (DDQN, k-DDQN,
+    BDQN, Farsighter); OB2I runs eagerly."""
 
 
 def expand_games(names: Sequence[str]) -> tuple[str, ...]:
@@ -142,7 +157,15 @@ def run_config(agent: Agent, study: StudyConfig, seed: int, run_dir: Path, task:
         buffer_size=min(base.buffer_size, max(steps, base.effective_recent_window)),
         checkpoint_every=0,
         save_replay=False,
+        device=study.device,
+        torch_threads=study.threads,
+        precision=study.precision,
+        compile=study.compile and agent.algo in COMPILED,
     )
+
+
+COMPILED = tuple(a.name for a in algorithms.TABLE if a.agent in STEP_AGENTS)
+"""Algorithms whose update --compile compiles (the others run eagerly)."""
 
 
 def _resolve(study: StudyConfig, args: Args) -> StudyConfig:
@@ -157,14 +180,25 @@ def _check(study: StudyConfig) -> None:
         raise FarsighterError("--games must name at least one game")
     if study.steps < 1:
         raise FarsighterError(f"--steps must be >= 1 (got {study.steps})")
-    for name, value in (("eval-every", study.eval_every), ("eval-episodes", study.eval_episodes)):
+    for name, value in (
+        ("eval-every", study.eval_every),
+        ("eval-episodes", study.eval_episodes),
+        ("threads", study.threads),
+    ):
         if value < 1:
             raise FarsighterError(f"--{name} must be >= 1 (got {value})")
+    if study.precision not in ("fp32", "bf16"):
+        raise FarsighterError(f"--precision must be fp32 or bf16 (got {study.precision!r})")
     from farsighter.envs import make_env
 
     for env, steps in tasks(study):  # a missing extra fails here, before any run
         cfg = run_config(AGENTS[0], study, 1, Path("."), (env, steps))
         make_env(cfg, seed=0).close()
+    from farsighter.config import validate
+    from farsighter.train import resolve_device
+
+    validate(cfg)  # the device's spelling first
+    resolve_device(study.device)  # then cuda without a GPU: refused before any run
 
 
 # ------------------------------------------------------------------------------------------------

@@ -66,19 +66,18 @@ def run_config(
     agent: Agent, env: str, preset: str, seed: int, steps: int, run_dir: Path, **values: Any
 ) -> Config:
     """One run of a study: ``preset`` <- the study's ``values`` <- the agent's overrides, with the
-    seed, the budget and the run directory; on one CPU thread and without a progress bar of its
-    own (the runner draws one for the whole study)."""
+    seed, the budget and the run directory; on one CPU thread unless ``values`` set
+    ``torch_threads`` and ``device``, and without a progress bar of its own (the runner draws one
+    for the whole study)."""
     return make_config(
         agent.algo,
         env,
         preset=preset,
-        **{**values, **agent.overrides},
+        **{"torch_threads": 1, "device": "cpu", **values, **agent.overrides},
         seed=seed,
         total_steps=steps,
         run_dir=str(run_dir),
         progress=False,
-        torch_threads=1,
-        device="cpu",
         overwrite=True,
     )
 
