@@ -29,7 +29,7 @@ from farsighter.studies.atari import (
     run_config,
     tasks,
 )
-from farsighter.studies.runner import Runs, load_runs
+from farsighter.studies.runner import Runs, load_runs, parse, settings_from
 
 
 def test_game_names_and_groups() -> None:
@@ -83,6 +83,8 @@ def test_device_threads_precision_and_compile_reach_every_run(tmp_path: Path) ->
         cfg = run_config(agent, study, 1, tmp_path, task)
         assert (cfg.device, cfg.torch_threads, cfg.precision) == ("cuda:1", 4, "bf16")
         assert cfg.compile == (agent.label != "OB2I")  # OB2I's update is not one step function
+    flags = "--games Pong --device cuda:1 --threads 4 --precision bf16 --compile".split()
+    assert settings_from(atari.STUDY, parse(atari.STUDY, flags)) == study
     default = run_config(AGENTS[2], StudyConfig(), 1, tmp_path, task)
     assert (default.device, default.torch_threads, default.precision) == ("cpu", 1, "fp32")
     assert default.compile is False

@@ -23,6 +23,7 @@ from pathlib import Path
 from typing import Annotated, Any
 
 import numpy as np
+import tyro
 
 from farsighter import algorithms
 from farsighter.config import STEP_AGENTS, Config, is_minatar_id
@@ -95,7 +96,7 @@ class Args(StudyArgs):
     """torch threads of each run (each worker process runs one run at a time)."""
     precision: Annotated[str | None, runner.study_flag("fp32|bf16")] = None
     """Arithmetic of the torsos (Config.precision): fp32, or bf16 autocast."""
-    compile: Annotated[bool | None, runner.study_flag("")] = None
+    compile: tyro.conf.FlagCreatePairsOff[bool] = False
     """torch.compile the updates (Config.compile) of the agents that support it (DDQN, k-DDQN,
     BDQN, Farsighter); OB2I runs eagerly."""
 
