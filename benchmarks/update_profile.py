@@ -9,7 +9,8 @@ Three layouts of the same network (same initial weights):
 * ``bf16``: the library's NatureCNN under bfloat16 autocast (``set_precision``).
 
 For each: the median milliseconds of a whole update (``--repeats`` after ``--warmup``; on CUDA
-also captured as a CUDA graph and replayed, ``update_ms_cuda_graph``), and of
+also captured as a CUDA graph and replayed, ``update_ms_cuda_graph``; with ``--compile`` also
+through ``torch.compile``, ``update_ms_compiled``), and of
 its phases timed one by one (with a device synchronisation at each boundary on CUDA):
 ``forward_s`` (Q(s) with grad), ``targets_s_next`` (online and target Q(s') without grad, the
 double-Q target), ``backward`` (loss, zero_grad, backward) and ``optimizer`` (clip and RMSProp
@@ -154,6 +155,10 @@ def profile_layout(
         step = GraphedStep(step_fn)
         graphed = round(median_ms(lambda: step({}), sync, args.warmup, args.repeats), 3)
         set_capturable(opt, False)
+    compiled = None
+    if args.compile:  # the same update through torch.compile (Config.compile); compiles first
+        compiled_update = torch.compile(update, dynamic=False)
+        compiled = round(median_ms(compiled_update, sync, args.warmup, args.repeats), 3)
 
     phases: dict[str, list[float]] = {
         "forward_s": [],
@@ -223,6 +228,7 @@ def profile_layout(
     return {
         "update_ms": round(whole, 3),
         "update_ms_cuda_graph": graphed,
+        "update_ms_compiled": compiled,
         "page_faults_per_update": round(faults, 1),
         "phases_ms": phase_ms,
         "phases_sum_ms": round(sum(phase_ms.values()), 3),
@@ -278,6 +284,11 @@ def main() -> None:
     p.add_argument("--profile-steps", type=int, default=20, help="updates under torch.profiler")
     p.add_argument("--top", type=int, default=12, help="operators listed per layout")
     p.add_argument(
+        "--compile",
+        action="store_true",
+        help="also time each layout's update through torch.compile (update_ms_compiled)",
+    )
+    p.add_argument(
         "--heap",
         choices=["keep", "default"],
         default="keep",
@@ -319,6 +330,7 @@ def main() -> None:
         "heap": "kept (farsighter.runtime.keep_heap)" if heap_kept else "glibc default",
         "update_ms": {k: v["update_ms"] for k, v in layouts.items()},
         "update_ms_cuda_graph": {k: v["update_ms_cuda_graph"] for k, v in layouts.items()},
+        "update_ms_compiled": {k: v["update_ms_compiled"] for k, v in layouts.items()},
         "speedup_over_fp32_nchw": speedup,
         "issue_update_ms": {k: ISSUE_MS[k] for k in layouts},
         "issue_note": "the issue's figures, a quiet machine at 2 threads (machine.load_average "

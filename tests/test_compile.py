@@ -82,3 +82,12 @@ def test_a_compiled_run_trains_checkpoints_and_resumes(tmp_path: Path) -> None:
     a, b = (load_agent(tmp_path / d).agent.torso.state_dict() for d in ("full", "cut"))
     for name in a:
         torch.testing.assert_close(a[name], b[name], rtol=0, atol=0)
+
+
+def test_compiled_agents_of_other_shapes_in_one_process(tmp_path: Path) -> None:
+    """Another batch size or network width in the same process compiles anew (static shapes),
+    and each compiled agent still matches its eager twin."""
+    for i, extra in enumerate(({"batch_size": 8}, {"hidden_sizes": (24, 24)})):
+        eager, eager_losses = _run(tmp_path / f"e{i}", "ddqn", False, **extra)
+        comp, comp_losses = _run(tmp_path / f"c{i}", "ddqn", True, **extra)
+        np.testing.assert_allclose(comp_losses, eager_losses, rtol=1e-4, atol=1e-6)

@@ -108,8 +108,8 @@ StepFn = Callable[[Tensors], Tensors]
 def wrap_step(fn: StepFn, graphs: bool, compiled: bool = False) -> StepFn:
     """``fn`` compiled by ``torch.compile`` when ``compiled`` (``Config.compile``), as a
     :class:`GraphedStep` when ``graphs``, else ``fn`` itself (eager)."""
-    if compiled:
-        return cast(StepFn, torch.compile(fn))
+    if compiled:  # static shapes: a new batch shape compiles anew rather than going symbolic
+        return cast(StepFn, torch.compile(fn, dynamic=False))
     return GraphedStep(fn) if graphs else fn
 
 
