@@ -903,7 +903,7 @@ def _algorithm_checks(cfg: Config, spec: algorithms.Algorithm) -> list[tuple[boo
             f"cuda_graph must be auto, on or off (got {cfg.cuda_graph!r})",
         ),
         (
-            cfg.cuda_graph != "on" or cfg.device not in ("cpu",),
+            cfg.cuda_graph != "on" or cfg.device != "cpu",
             "cuda_graph on needs a CUDA device (device cpu given); use auto or off",
         ),
         (

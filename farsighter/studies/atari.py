@@ -42,6 +42,8 @@ AGENTS: tuple[Agent, ...] = (
     Agent("OB2I", "ob2i"),
     Agent("k-DDQN", "kddqn"),
 )
+COMPILED = tuple(a.name for a in algorithms.TABLE if a.agent in STEP_AGENTS)
+"""Algorithms whose update --compile compiles (the others run eagerly)."""
 PAPER_COLUMN = {"DDQN": "ddqn", "BDQN": "bdqn", "Farsighter": "farsighter", "OB2I": "ob2i"}
 
 
@@ -165,10 +167,6 @@ def run_config(agent: Agent, study: StudyConfig, seed: int, run_dir: Path, task:
     )
 
 
-COMPILED = tuple(a.name for a in algorithms.TABLE if a.agent in STEP_AGENTS)
-"""Algorithms whose update --compile compiles (the others run eagerly)."""
-
-
 def _resolve(study: StudyConfig, args: Args) -> StudyConfig:
     study = replace(study, games=expand_games(study.games))
     if args.eval_every is None:  # at least two evaluations
@@ -192,13 +190,13 @@ def _check(study: StudyConfig) -> None:
         raise FarsighterError(f"--precision must be fp32 or bf16 (got {study.precision!r})")
     from farsighter.envs import make_env
 
-    for env, steps in tasks(study):  # a missing extra fails here, before any run
-        cfg = run_config(AGENTS[0], study, 1, Path("."), (env, steps))
+    configs = [run_config(AGENTS[0], study, 1, Path("."), task) for task in tasks(study)]
+    for cfg in configs:  # a missing extra fails here, before any run
         make_env(cfg, seed=0).close()
     from farsighter.config import validate
     from farsighter.train import resolve_device
 
-    validate(cfg)  # the device's spelling first
+    validate(configs[0])  # the device's spelling first
     resolve_device(study.device)  # then cuda without a GPU: refused before any run
 
 
