@@ -1,4 +1,5 @@
-"""Where a training step's time goes in the real loop: cProfile over a steady-state window.
+"""Where a training step's time goes in the real loop: cProfile over a steady-state window, or
+(``--phases``) wall-clock timers around the loop's phases without a profiler.
 
 The same run as one ``benchmarks.atari_sps`` measurement (Breakout, epsilon at its final value,
 replay ratio 1/4, the Atari preset), with Python's cProfile switched on for the window only. On a
@@ -7,7 +8,13 @@ GPU every host-device synchronisation shows up as time inside the call that wait
 waits. The JSON gives each listed function's own and cumulative milliseconds per environment
 step, and the table is printed.
 
-    python -m benchmarks.loop_profile [--algo farsighter] [--device cuda] [--num-envs 16]
+``--phases`` times, per environment step, ``agent.act`` (on a GPU it includes waiting for the
+updates queued before it: the acting forward reads the weights they write), the environments'
+``step`` and inside it the emulator (envpool's own ``step`` call), ``agent.observe`` and
+``agent.learn`` (replay sampling, copies and the update launches), and the rest of the loop
+(logging, callbacks). No profiler runs, so the steps/s it reports is the real one.
+
+    python -m benchmarks.loop_profile [--algo farsighter] [--device cuda] [--num-envs 16] [--phases]
 """
 
 from __future__ import annotations
@@ -17,8 +24,12 @@ import cProfile
 import io
 import pstats
 import tempfile
+import time
+from collections.abc import Callable, Iterator
+from contextlib import contextmanager
 from typing import Any
 
+import gymnasium as gym
 import torch
 
 from benchmarks.atari_sps import Window, steady_state_config
@@ -45,6 +56,88 @@ class ProfiledWindow(Window):
             self.on = True
 
 
+class PhaseTimer:
+    """Wall-clock seconds spent in named calls while ``on`` (the window)."""
+
+    def __init__(self) -> None:
+        self.on = False
+        self.seconds: dict[str, float] = {}
+        self.calls: dict[str, int] = {}
+
+    def wrap(self, name: str, fn: Callable[..., Any]) -> Callable[..., Any]:
+        def timed(*args: Any, **kwargs: Any) -> Any:
+            if not self.on:
+                return fn(*args, **kwargs)
+            t0 = time.perf_counter()
+            try:
+                return fn(*args, **kwargs)
+            finally:
+                self.seconds[name] = self.seconds.get(name, 0.0) + time.perf_counter() - t0
+                self.calls[name] = self.calls.get(name, 0) + 1
+
+        return timed
+
+
+class _TimedPool:
+    """envpool's pool with its ``step`` and ``reset`` timed (the emulator and envpool's own
+    Python conversion)."""
+
+    def __init__(self, pool: Any, timer: PhaseTimer) -> None:
+        self._pool = pool
+        self.step = timer.wrap("env.emulator", pool.step)
+        self.reset = timer.wrap("env.emulator", pool.reset)
+
+    def __getattr__(self, name: str) -> Any:
+        return getattr(self._pool, name)
+
+
+@contextmanager
+def phase_timers(algo: str, timer: PhaseTimer) -> Iterator[None]:
+    """Wrap the agent class's act/observe/learn and the vector env's step for the block."""
+    import importlib
+
+    from farsighter import algorithms
+    from farsighter.envs.envpool_vec import EnvpoolAtariVector
+
+    cls = importlib.import_module(f"farsighter.agents.{algorithms.get(algo).agent}").AGENT
+    patched: list[tuple[Any, str, Any]] = []
+    for name in ("act", "observe", "learn"):
+        patched.append((cls, name, getattr(cls, name)))
+        setattr(cls, name, timer.wrap(f"agent.{name}", getattr(cls, name)))
+    for owner in (EnvpoolAtariVector, gym.vector.SyncVectorEnv):
+        patched.append((owner, "step", owner.step))
+        owner.step = timer.wrap("env.step", owner.step)  # type: ignore[method-assign]
+    make_pool = EnvpoolAtariVector._make_pool
+
+    def timed_make_pool(self: Any, seed: int) -> Any:
+        pool = make_pool(self, seed)
+        self._pool = _TimedPool(pool, timer)
+        return self._pool
+
+    patched.append((EnvpoolAtariVector, "_make_pool", make_pool))
+    EnvpoolAtariVector._make_pool = timed_make_pool  # type: ignore[method-assign]
+    try:
+        yield
+    finally:
+        for owner, name, original in reversed(patched):
+            setattr(owner, name, original)
+
+
+class PhasedWindow(Window):
+    """``Window`` that switches a :class:`PhaseTimer` on from its first step to step ``end``."""
+
+    def __init__(self, start: int, end: int, timer: PhaseTimer) -> None:
+        super().__init__(start)
+        self.end, self.timer = end, timer
+
+    def on_step(self, global_step: int, info: dict[str, Any], agent: Any) -> None:
+        if self.timer.on and global_step >= self.end:
+            self.timer.on = False
+        super().on_step(global_step, info, agent)
+        if self.first is not None and self.first["step"] == global_step:
+            self.timer.on = True
+
+
 def main() -> None:
     p = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawTextHelpFormatter)
     p.add_argument("--algo", default="farsighter")
@@ -57,6 +150,7 @@ def main() -> None:
     p.add_argument("--backend", choices=["auto", "gymnasium", "envpool"], default="auto")
     p.add_argument("--cuda-graph", choices=["auto", "on", "off"], default="auto")
     p.add_argument("--top", type=int, default=30)
+    p.add_argument("--phases", action="store_true", help="phase timers instead of cProfile")
     p.add_argument("--name", help="result file (default: loop_profile_<algo>_<device>_e<E>)")
     args = p.parse_args()
 
@@ -78,6 +172,9 @@ def main() -> None:
         "cuda_graph": args.cuda_graph,
         "backend": args.backend,
     }
+    if args.phases:
+        phases(args, spec)
+        return
     with tempfile.TemporaryDirectory() as tmp:
         cfg = steady_state_config(spec, f"{tmp}/run")
         window = ProfiledWindow(args.warmup, args.warmup + args.measure)
@@ -120,6 +217,48 @@ def main() -> None:
             "top_by_cumulative_time": sorted(rows, key=lambda r: -r["cumulative_ms_per_step"])[
                 : args.top
             ],
+        },
+    )
+
+
+def phases(args: argparse.Namespace, spec: dict[str, Any]) -> None:
+    from farsighter import train
+
+    timer = PhaseTimer()
+    with tempfile.TemporaryDirectory() as tmp, phase_timers(args.algo, timer):
+        cfg = steady_state_config(spec, f"{tmp}/run")
+        window = PhasedWindow(args.warmup, args.warmup + args.measure, timer)
+        train(cfg, callbacks=[window])
+    assert window.first is not None and window.last is not None
+    steps = window.last["step"] - window.first["step"]
+    wall = window.last["wall"] - window.first["wall"]
+    ms = {name: 1000 * sec / steps for name, sec in timer.seconds.items()}
+    timed = sum(v for k, v in ms.items() if k != "env.emulator")
+    ms["loop.rest"] = 1000 * wall / steps - timed
+    ms["env.wrapper"] = ms.get("env.step", 0.0) - ms.get("env.emulator", 0.0)
+    table = {k: round(v, 4) for k, v in sorted(ms.items())}
+    per_batch = {k: round(v * args.num_envs, 3) for k, v in table.items()}
+    print(f"{args.algo} {args.device} E={args.num_envs}: {steps / wall:.1f} steps/s")
+    for k, v in table.items():
+        print(f"  {k:14s} {v:8.4f} ms/step  {per_batch[k]:8.3f} ms per vector step")
+    name = args.name or f"loop_phases_{args.algo}_{args.device}_e{args.num_envs}"
+    write_result(
+        name,
+        {
+            "algo": args.algo,
+            "device": args.device,
+            "num_envs": args.num_envs,
+            "precision": args.precision,
+            "cuda_graph": args.cuda_graph,
+            "threads": args.threads,
+            "steps": steps,
+            "sps": round(steps / wall, 2),
+            "ms_per_env_step": table,
+            "ms_per_vector_step": per_batch,
+            "calls": timer.calls,
+            "note": "agent.act includes, on a GPU, waiting for the updates queued before it; "
+            "env.emulator is inside env.step (env.wrapper = env.step - env.emulator); "
+            "loop.rest = wall - act - step - observe - learn",
         },
     )
 

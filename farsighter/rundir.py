@@ -46,6 +46,7 @@ RESUMABLE_FIELDS = {
     "device",
     "cuda_graph",
     "compile",
+    "gpu_replay",
     "progress",
     "run_dir",
     "torch_threads",

@@ -174,6 +174,24 @@ def test_graphed_updates_equal_eager_updates(
         torch.testing.assert_close(graphed.head.mean_AD, eager.head.mean_AD, rtol=1e-4, atol=1e-5)
 
 
+@pytest.mark.skipif(not CUDA, reason="needs a CUDA device (run on the GPU benchmark machine)")
+@pytest.mark.parametrize("algo", ["ddqn", "farsighter"])
+def test_minibatches_from_the_gpu_replay_mirror_make_the_same_updates(
+    tmp_path: Path, algo: str
+) -> None:
+    runs = []
+    for setting in ("off", "auto"):
+        agent = _agent(tmp_path / setting, algo, device="cuda", gpu_replay=setting)
+        assert (agent.replay.mirror is not None) == (setting == "auto")
+        _feed(agent, 300)
+        losses = [float(agent.learn(step).get("td_loss", np.nan)) for step in range(1, 121)]
+        runs.append((agent, losses))
+    (host, host_losses), (mirrored, mirrored_losses) = runs
+    np.testing.assert_allclose(mirrored_losses, host_losses, rtol=1e-4, atol=1e-6)
+    for a, b in zip(_params(mirrored), _params(host), strict=True):
+        torch.testing.assert_close(a, b, rtol=1e-4, atol=1e-5)
+
+
 @pytest.mark.parametrize(
     "device",
     ["cpu", pytest.param("cuda", marks=pytest.mark.skipif(not CUDA, reason="needs CUDA"))],

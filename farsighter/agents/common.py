@@ -45,9 +45,12 @@ def make_replay(
     frame_stack: int,
     seed: int,
     act_space: gym.Space | None = None,
+    device: torch.device | None = None,
 ) -> ReplayBuffer:
     """A replay buffer sized for the run; uint8 images keep one byte per pixel. Discrete actions
-    are stored as int32; Box actions (``act_space``) as float32 vectors of their shape."""
+    are stored as int32; Box actions (``act_space``) as float32 vectors of their shape. On a CUDA
+    ``device`` with ``cfg.gpu_replay`` auto, observations are mirrored there (minibatches are
+    gathered on the GPU: :func:`sample_minibatch`)."""
     shape = obs_space.shape
     assert shape is not None
     action_shape: tuple[int, ...] = ()
@@ -63,20 +66,30 @@ def make_replay(
         action_shape=action_shape,
         action_dtype=action_dtype,
         seed=seed,
+        device=device if uses_gpu_replay(cfg, device) else None,
     )
 
 
-def obs_tensor(obs: np.ndarray, device: torch.device) -> torch.Tensor:
+def uses_gpu_replay(cfg: Config, device: torch.device | None) -> bool:
+    """``cfg.gpu_replay`` auto on a CUDA device."""
+    return device is not None and device.type == "cuda" and cfg.gpu_replay == "auto"
+
+
+def obs_tensor(obs: np.ndarray | torch.Tensor, device: torch.device) -> torch.Tensor:
     """Observations keep their dtype (uint8 frames cross to the device as bytes). To a GPU they
-    go through pinned memory with a non-blocking copy, so the host does not wait for it."""
-    return to_device(np.asarray(obs), device)
+    go through pinned memory with a non-blocking copy, so the host does not wait for it; a
+    tensor already there (from a replay's device mirror) is used as it is."""
+    return to_device(obs if isinstance(obs, torch.Tensor) else np.asarray(obs), device)
 
 
 def to_device(
-    x: np.ndarray, device: torch.device, dtype: torch.dtype | None = None
+    x: np.ndarray | torch.Tensor, device: torch.device, dtype: torch.dtype | None = None
 ) -> torch.Tensor:
     """A numpy array on ``device``: as is on the CPU; through pinned memory and a non-blocking
-    copy to a GPU (the copy is ordered before any kernel that reads it on the same stream)."""
+    copy to a GPU (the copy is ordered before any kernel that reads it on the same stream). A
+    tensor already on ``device`` is returned as it is (converted to ``dtype`` when given)."""
+    if isinstance(x, torch.Tensor) and x.device == torch.device(device):
+        return x if dtype is None else x.to(dtype)
     t = torch.as_tensor(x, dtype=dtype)
     if torch.device(device).type != "cuda":
         return t
@@ -151,6 +164,7 @@ def sample_minibatch(replay: ReplayBuffer, cfg: Config, batch_size: int, k: int)
         gamma=cfg.gamma,
         recent=cfg.effective_recent_window if cfg.sample_recent else None,
         stride=k if cfg.stride else 1,
+        on_device=True,  # observations from the replay's device mirror when it keeps one
     )
 
 

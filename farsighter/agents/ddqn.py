@@ -68,7 +68,7 @@ class DDQNAgent:
         self.graphs = graphs_enabled(cfg.cuda_graph, device, supported=not cfg.compile)
         set_capturable(self.opt, self.graphs)
         self.step = wrap_step(self._step, self.graphs, cfg.compile)
-        self.replay = make_replay(cfg, obs_space, frame_stack, seed=cfg.seed + 1)
+        self.replay = make_replay(cfg, obs_space, frame_stack, seed=cfg.seed + 1, device=device)
         self.rng = np.random.default_rng(cfg.seed + 2)
         self.counters = Counters(k=cfg.k)
         self.epsilon = cfg.eps_start

@@ -125,7 +125,7 @@ class FarsighterAgent:
         self.graphs = graphs_enabled(cfg.cuda_graph, device, supported=not cfg.compile)
         set_capturable(self.opt, self.graphs)
         self.step = wrap_step(self._step, self.graphs, cfg.compile)
-        self.replay = make_replay(cfg, obs_space, frame_stack, seed=cfg.seed + 1)
+        self.replay = make_replay(cfg, obs_space, frame_stack, seed=cfg.seed + 1, device=device)
         self.rng = np.random.default_rng(cfg.seed + 2)
         self.gen = torch.Generator(device=device)
         self.gen.manual_seed(cfg.seed + 3)
@@ -344,6 +344,7 @@ class FarsighterAgent:
                 self.counters.k,
                 self.cfg.gamma,
                 stride=self.counters.k if self.cfg.stride else 1,  # Algorithm 1: one tuple per k
+                on_device=True,  # from the device mirror when the replay keeps one
             )
             if len(part.actions) == 0:
                 continue

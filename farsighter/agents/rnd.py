@@ -112,7 +112,7 @@ class RNDAgent:
         self.whiten = r.normalize_obs and len(shape) == 1
         self.obs_rms = RunningMeanStd(tuple(shape) if self.whiten else ())
         self.intrinsic_rms = RunningMeanStd()
-        self.replay = make_replay(cfg, obs_space, frame_stack, seed=cfg.seed + 1)
+        self.replay = make_replay(cfg, obs_space, frame_stack, seed=cfg.seed + 1, device=device)
         self.rng = np.random.default_rng(cfg.seed + 2)
         self.counters = Counters(k=cfg.k)
         self.epsilon = cfg.eps_start

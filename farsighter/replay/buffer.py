@@ -21,6 +21,13 @@ A start ``L`` is valid when (each rule has a unit test):
    crosses an episode end stops there: no reward from the next episode);
 4. with ``stride``, ``t_L`` is a multiple of k (Algorithm 1 literally: one tuple per k steps);
 5. with a recent window, ``L`` is among the latest rows (Algorithm 1 line 4).
+
+**Device mirror** (``device``; the agents ask for it when they train on a GPU, ``Config.
+gpu_replay``): the observation rows are also kept in one tensor on that device, with one extra
+row of zeros, written as they are added. :meth:`sample` with ``on_device=True`` then forms the
+stacks there: the host computes which row each frame of a stack is (the zero row before an
+episode start) and sends those indices, not the frames. The indices, and so the minibatch, are
+the same as the host gather's.
 """
 
 from __future__ import annotations
@@ -29,6 +36,7 @@ from dataclasses import dataclass
 from typing import Any
 
 import numpy as np
+import torch
 
 from farsighter.errors import ConfigError
 from farsighter.ops.targets import nstep_returns
@@ -36,6 +44,7 @@ from farsighter.ops.targets import nstep_returns
 TERMINATED = np.uint8(1)
 TRUNCATED = np.uint8(2)
 FINAL = np.uint8(4)
+MIRROR_CHUNK = 65_536  # rows per copy when a loaded replay fills its device mirror
 
 
 @dataclass(frozen=True)
@@ -61,16 +70,17 @@ class VectorStep:
 class Batch:
     """A minibatch of k-step transitions (numpy; the agent moves it to its device)."""
 
-    obs: np.ndarray
-    """Start observations s_t (stacked for images)."""
+    obs: Any
+    """Start observations s_t (stacked for images): numpy, or a tensor on the replay's device
+    when sampled with ``on_device``."""
     actions: np.ndarray
     """Actions a_t."""
     returns: np.ndarray
     """r^k = sum_j gamma^j r_{t+j}, float32."""
     bootstrap: np.ndarray
     """gamma^n, or 0 if the episode terminated inside the window, float32."""
-    next_obs: np.ndarray
-    """Bootstrap observations s_{t+n}."""
+    next_obs: Any
+    """Bootstrap observations s_{t+n} (numpy, or on the device like ``obs``)."""
     steps: np.ndarray
     """n: transitions summed (k unless the episode ended first)."""
     env_index: np.ndarray
@@ -110,6 +120,7 @@ class ReplayBuffer:
         action_shape: tuple[int, ...] = (),
         action_dtype: Any = np.int32,
         seed: int = 0,
+        device: torch.device | str | None = None,
     ) -> None:
         if capacity < 1:
             raise ConfigError(f"replay capacity must be >= 1 (got {capacity})")
@@ -138,6 +149,12 @@ class ReplayBuffer:
         self.episode_t = np.zeros(e, dtype=np.int32)  # t of the next row per stream
         self.floor = np.zeros(e, dtype=np.int64)  # rows below it were cleared
         self.rng = np.random.default_rng(seed)
+        # The device mirror: rows e * capacity + slot, then one row of zeros (stack padding).
+        self.mirror: torch.Tensor | None = None
+        if device is not None:
+            dtype = torch.from_numpy(np.zeros(0, dtype=obs_dtype)).dtype
+            self.mirror = torch.zeros((e * c + 1, *self.frame_shape), dtype=dtype, device=device)
+        self._written: list[int] = []  # flat rows written by the current add (for the mirror)
 
     # ------------------------------------------------------------------ writing
     @property
@@ -160,6 +177,8 @@ class ReplayBuffer:
         self.rewards[e, slot] = reward
         self.flags[e, slot] = flag
         self.t_ep[e, slot] = self.episode_t[e]
+        if self.mirror is not None:
+            self._written.append(e * self.capacity + int(slot))
         self.count[e] += 1
         self.episode_t[e] += 1
 
@@ -194,6 +213,16 @@ class ReplayBuffer:
                     raise ValueError("final_obs_E is required for streams whose episode ended")
                 self._write(e, self._frame(np.asarray(final_obs_E[e])), 0, 0.0, int(FINAL))
                 self.episode_t[e] = 0
+        if self._written:
+            self._to_mirror(np.asarray(self._written, dtype=np.int64))
+            self._written.clear()
+
+    def _to_mirror(self, flat_N: np.ndarray) -> None:
+        """Copy the host rows ``flat_N`` (flat ``e * capacity + slot``) into the device mirror."""
+        assert self.mirror is not None
+        rows = self.frames.reshape(-1, *self.frame_shape)[flat_N]
+        index = _to(torch.from_numpy(flat_N), self.mirror.device)
+        self.mirror.index_copy_(0, index, _to(torch.from_numpy(rows), self.mirror.device))
 
     def clear(self) -> None:
         """Forget every row (Algorithm 1 line 7 empties the buffer when k changes).
@@ -244,10 +273,12 @@ class ReplayBuffer:
         recent: int | None = None,
         stride: int = 1,
         max_tries: int = 100,
+        on_device: bool = False,
     ) -> Batch:
         """Uniform minibatch of valid k-step windows (rejection sampling, as in Dopamine).
 
         ``recent``: draw only from the latest ``recent`` transitions over all streams.
+        ``on_device``: observations gathered from the device mirror, when there is one.
         """
         if k < 1:
             raise ConfigError(f"k must be >= 1 (got {k})")
@@ -284,11 +315,14 @@ class ReplayBuffer:
             )
         e_B = np.concatenate(chosen_e)
         start_B = np.concatenate(chosen_l)
-        return self.gather(e_B, start_B, k, gamma)
+        return self.gather(e_B, start_B, k, gamma, on_device=on_device)
 
-    def gather(self, e_B: np.ndarray, start_B: np.ndarray, k: int, gamma: float) -> Batch:
+    def gather(
+        self, e_B: np.ndarray, start_B: np.ndarray, k: int, gamma: float, on_device: bool = False
+    ) -> Batch:
         """The k-step windows starting at logical rows ``start_B`` of streams ``e_B`` (valid
-        starts only: see :meth:`sample_indices`, which checks them)."""
+        starts only: see :meth:`sample_indices`, which checks them). With ``on_device`` and a
+        mirror, ``obs`` and ``next_obs`` are tensors on the mirror's device."""
         rows_BK = (start_B[:, None] + np.arange(k)[None, :]) % self.capacity
         flags_BK = self.flags[e_B[:, None], rows_BK]
         rewards_BK = self.rewards[e_B[:, None], rows_BK]
@@ -300,12 +334,21 @@ class ReplayBuffer:
         )
         next_B = start_B + steps_B
         slot_B = start_B % self.capacity
+        obs: np.ndarray | torch.Tensor
+        next_obs: np.ndarray | torch.Tensor
+        if on_device and self.mirror is not None:
+            both = self.stacked_on_device(
+                np.concatenate([e_B, e_B]), np.concatenate([start_B, next_B])
+            )
+            obs, next_obs = both[: len(e_B)], both[len(e_B) :]
+        else:
+            obs, next_obs = self.stacked_obs(e_B, start_B), self.stacked_obs(e_B, next_B)
         return Batch(
-            obs=self.stacked_obs(e_B, start_B),
+            obs=obs,
             actions=self.actions[e_B, slot_B],
             returns=returns_B,
             bootstrap=bootstrap_B,
-            next_obs=self.stacked_obs(e_B, next_B),
+            next_obs=next_obs,
             steps=steps_B,
             env_index=e_B,
             index=start_B,
@@ -324,6 +367,29 @@ class ReplayBuffer:
         before_start_BS = back_S[None, :] > t_B[:, None]
         out[before_start_BS] = 0
         return out
+
+    def stack_rows(self, e_B: np.ndarray, logical_B: np.ndarray) -> np.ndarray:
+        """(B, S) flat rows (``e * capacity + slot``) of the frames that stack the observations
+        at logical rows ``logical_B``, oldest first; frames from before the episode start point
+        at the mirror's zero row (``num_envs * capacity``)."""
+        slot_B = logical_B % self.capacity
+        s = self.frame_stack
+        if s == 1:
+            return (e_B * self.capacity + slot_B)[:, None]
+        t_B = self.t_ep[e_B, slot_B].astype(np.int64)
+        back_S = np.arange(s - 1, -1, -1)  # oldest first
+        rows_BS = (logical_B[:, None] - back_S[None, :]) % self.capacity
+        flat_BS = e_B[:, None] * self.capacity + rows_BS
+        flat_BS[back_S[None, :] > t_B[:, None]] = self.num_envs * self.capacity
+        return flat_BS
+
+    def stacked_on_device(self, e_B: np.ndarray, logical_B: np.ndarray) -> torch.Tensor:
+        """:meth:`stacked_obs` gathered from the device mirror: only indices cross to it."""
+        if self.mirror is None:
+            raise ValueError("this replay keeps no device mirror (made without a device)")
+        flat_BS = torch.from_numpy(self.stack_rows(e_B, logical_B))
+        out = self.mirror[_to(flat_BS, self.mirror.device)]  # (B, S, *frame)
+        return out[:, 0] if self.frame_stack == 1 else out
 
     def recent_indices(self, n: int) -> tuple[np.ndarray, np.ndarray]:
         """(stream, logical index) of up to ``n`` most recent non-final live rows whose next row
@@ -358,11 +424,17 @@ class ReplayBuffer:
         return e_N.astype(np.int64), l_N
 
     def sample_indices(
-        self, e_B: np.ndarray, start_B: np.ndarray, k: int, gamma: float, stride: int = 1
+        self,
+        e_B: np.ndarray,
+        start_B: np.ndarray,
+        k: int,
+        gamma: float,
+        stride: int = 1,
+        on_device: bool = False,
     ) -> Batch:
         """k-step batch at the given candidate starts, keeping only the valid ones."""
         ok_B, _ = self.valid_mask(e_B, start_B, k, stride)
-        return self.gather(e_B[ok_B], start_B[ok_B], k, gamma)
+        return self.gather(e_B[ok_B], start_B[ok_B], k, gamma, on_device=on_device)
 
     # ------------------------------------------------------------------ whole episodes
     def episode_bounds(self) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
@@ -444,3 +516,15 @@ class ReplayBuffer:
         self.episode_t[...] = state["episode_t"]
         self.floor[...] = state["floor"]
         self.rng.bit_generator.state = state["rng"]
+        if self.mirror is not None:  # in chunks: no pinned copy of the whole replay at once
+            rows = self.num_envs * self.capacity
+            for lo in range(0, rows, MIRROR_CHUNK):
+                self._to_mirror(np.arange(lo, min(lo + MIRROR_CHUNK, rows), dtype=np.int64))
+
+
+def _to(x: torch.Tensor, device: torch.device) -> torch.Tensor:
+    """``x`` on ``device``; to a GPU through pinned memory and a non-blocking copy (ordered
+    before the kernels that read it on the same stream)."""
+    if device.type != "cuda":
+        return x
+    return x.pin_memory().to(device, non_blocking=True)
