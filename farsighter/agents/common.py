@@ -87,9 +87,9 @@ def to_device(
 ) -> torch.Tensor:
     """A numpy array on ``device``: as is on the CPU; through pinned memory and a non-blocking
     copy to a GPU (the copy is ordered before any kernel that reads it on the same stream). A
-    tensor already on ``device`` is returned as it is (converted to ``dtype`` when given)."""
-    if isinstance(x, torch.Tensor) and x.device == torch.device(device):
-        return x if dtype is None else x.to(dtype)
+    tensor already on a GPU (a replay's device mirror) is not copied again."""
+    if isinstance(x, torch.Tensor) and x.device.type != "cpu":
+        return x.to(device=device, dtype=dtype)  # no copy when already there ("cuda" = "cuda:0")
     t = torch.as_tensor(x, dtype=dtype)
     if torch.device(device).type != "cuda":
         return t
