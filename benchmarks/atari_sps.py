@@ -130,6 +130,8 @@ def steady_state_config(spec: dict[str, Any], run_dir: str) -> Config:
         precision=spec["precision"],
         cuda_graph=spec.get("cuda_graph", "auto"),
         compile=spec.get("compile", False),
+        overlap_env=spec.get("overlap_env", "auto"),
+        gpu_replay=spec.get("gpu_replay", "auto"),
         eval_every=0,
         eval_episodes=1,  # the final evaluation is outside the window; keep it short
         eval_max_steps=200,
@@ -168,6 +170,8 @@ def run_one(spec: dict[str, Any]) -> dict[str, Any]:
         "precision": spec["precision"],
         "cuda_graph": cfg.cuda_graph,
         "compile": cfg.compile,
+        "overlap_env": cfg.overlap_env,
+        "gpu_replay": cfg.gpu_replay,
         "threads": torch.get_num_threads(),
         "device": spec["device"],
         "backend": backend,
@@ -438,6 +442,15 @@ def parse_args() -> argparse.Namespace:
         default=["off"],
         help="Config.compile: measure eager, compiled, or both (table keys end in _compiled)",
     )
+    p.add_argument(
+        "--overlap-env",
+        choices=["auto", "on", "off"],
+        default="auto",
+        help="Config.overlap_env (on needs --backend envpool)",
+    )
+    p.add_argument(
+        "--gpu-replay", choices=["auto", "off"], default="auto", help="Config.gpu_replay"
+    )
     p.add_argument("--repeats", type=int, default=1, help="rounds over all configurations")
     p.add_argument("--seed", type=int, default=1)
     p.add_argument("--cleanrl", type=Path, help="CleanRL checkout to measure beside ours")
@@ -484,6 +497,8 @@ def main() -> None:
         "backend": backend,
         "seed": args.seed,
         "cuda_graph": args.cuda_graph,
+        "overlap_env": args.overlap_env,
+        "gpu_replay": args.gpu_replay,
     }
     compiled = [c == "on" for c in args.compile]
     configs = [
@@ -617,6 +632,8 @@ def main() -> None:
                 "backend": backend,
                 "cuda_graph": args.cuda_graph,
                 "compile": args.compile,
+                "overlap_env": args.overlap_env,
+                "gpu_replay": args.gpu_replay,
                 "repeats": args.repeats,
                 "seed": args.seed,
                 "statistic": "median over rounds",

@@ -79,13 +79,13 @@ class PhaseTimer:
 
 
 class _TimedPool:
-    """envpool's pool with its ``step`` and ``reset`` timed (the emulator and envpool's own
-    Python conversion)."""
+    """envpool's pool with its ``step``, ``reset``, ``send`` and ``recv`` timed (the emulator, or
+    with ``overlap_env`` the wait for it, and envpool's own Python conversion)."""
 
     def __init__(self, pool: Any, timer: PhaseTimer) -> None:
         self._pool = pool
-        self.step = timer.wrap("env.emulator", pool.step)
-        self.reset = timer.wrap("env.emulator", pool.reset)
+        for name in ("step", "reset", "send", "recv"):
+            setattr(self, name, timer.wrap("env.emulator", getattr(pool, name)))
 
     def __getattr__(self, name: str) -> Any:
         return getattr(self._pool, name)
@@ -104,9 +104,10 @@ def phase_timers(algo: str, timer: PhaseTimer) -> Iterator[None]:
     for name in ("act", "observe", "learn"):
         patched.append((cls, name, getattr(cls, name)))
         setattr(cls, name, timer.wrap(f"agent.{name}", getattr(cls, name)))
-    for owner in (EnvpoolAtariVector, gym.vector.SyncVectorEnv):
-        patched.append((owner, "step", owner.step))
-        owner.step = timer.wrap("env.step", owner.step)  # type: ignore[method-assign]
+    steps = [(EnvpoolAtariVector, n) for n in ("step", "step_async", "step_wait")]
+    for owner, name in [*steps, (gym.vector.SyncVectorEnv, "step")]:
+        patched.append((owner, name, getattr(owner, name)))
+        setattr(owner, name, timer.wrap("env.step", getattr(owner, name)))
     make_pool = EnvpoolAtariVector._make_pool
 
     def timed_make_pool(self: Any, seed: int) -> Any:
@@ -151,6 +152,8 @@ def main() -> None:
     p.add_argument("--cuda-graph", choices=["auto", "on", "off"], default="auto")
     p.add_argument("--top", type=int, default=30)
     p.add_argument("--phases", action="store_true", help="phase timers instead of cProfile")
+    p.add_argument("--overlap-env", choices=["auto", "on", "off"], default="auto")
+    p.add_argument("--gpu-replay", choices=["auto", "off"], default="auto")
     p.add_argument("--name", help="result file (default: loop_profile_<algo>_<device>_e<E>)")
     args = p.parse_args()
 
@@ -171,6 +174,8 @@ def main() -> None:
         "precision": args.precision,
         "cuda_graph": args.cuda_graph,
         "backend": args.backend,
+        "overlap_env": args.overlap_env,
+        "gpu_replay": args.gpu_replay,
     }
     if args.phases:
         phases(args, spec)

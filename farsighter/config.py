@@ -277,6 +277,13 @@ class Config:
     (farsighter.agents.cuda_graph). auto: on a CUDA device, for the agents whose update allows
     it (ddqn, kddqn, bdqn, farsighter); on: insist (refused for the others, and on CPU); off:
     eager. The updates are the same either way. Off when compile is on."""
+    overlap_env: Literal["auto", "on", "off"] = "auto"
+    """Step the environments while the updates run: at each vector step the actions are sent,
+    the updates owed are made while the games step on their own threads, and the step's
+    transitions are stored after them (so those updates sample the replay one vector step
+    older; the next ones see it). Needs environments that step asynchronously (the envpool
+    Atari backend). auto: on with such environments on a CUDA device; on: also on a CPU
+    (refused where the environments cannot); off: act, step, store, update in turn."""
     gpu_replay: Literal["auto", "off"] = "auto"
     """auto: on a CUDA device, the replay's observations are also kept in GPU memory and
     minibatches are stacked there, so only row indices cross from the host per update (one byte
@@ -906,6 +913,10 @@ def _algorithm_checks(cfg: Config, spec: algorithms.Algorithm) -> list[tuple[boo
         (
             cfg.cuda_graph in ("auto", "on", "off"),
             f"cuda_graph must be auto, on or off (got {cfg.cuda_graph!r})",
+        ),
+        (
+            cfg.overlap_env in ("auto", "on", "off"),
+            f"overlap_env must be auto, on or off (got {cfg.overlap_env!r})",
         ),
         (
             cfg.gpu_replay in ("auto", "off"),

@@ -43,6 +43,19 @@ def resolve_device(name: str) -> torch.device:
     return torch.device(name)
 
 
+def overlap_enabled(setting: str, envs: gym.vector.VectorEnv, device: torch.device) -> bool:
+    """Whether the loop steps ``envs`` while it updates (``Config.overlap_env``): ``on`` when the
+    environments can (``step_async`` / ``step_wait``; refused with ConfigError where they
+    cannot), ``auto`` when they can and the device is CUDA, ``off`` never."""
+    can = callable(getattr(envs, "step_async", None)) and callable(getattr(envs, "step_wait", None))
+    if setting == "on" and not can:
+        raise ConfigError(
+            "overlap_env on needs environments that step asynchronously (the envpool Atari "
+            f"backend); {type(envs).__name__} steps in the loop's thread; use auto or off"
+        )
+    return setting == "on" or (setting == "auto" and can and device.type == "cuda")
+
+
 class Callback(Protocol):
     """Observes a run without changing it (studies use it to record what the loop does not)."""
 
@@ -64,6 +77,7 @@ def train(cfg: Config, callbacks: Sequence[Callback] = ()) -> dict[str, Any]:
     )  # a bad id fails before the run dir is touched
     obs_space, act_space = envs.single_observation_space, envs.single_action_space
     check_spaces(cfg.algo, obs_space, act_space)
+    overlap = overlap_enabled(cfg.overlap_env, envs, device)
     path = prepare_run_dir(cfg)
     prepare_process(cfg.torch_threads)
     agent = build_agent(cfg, obs_space, act_space, frame_stack=frame_stack_of(cfg), device=device)
@@ -71,16 +85,23 @@ def train(cfg: Config, callbacks: Sequence[Callback] = ()) -> dict[str, Any]:
         state, envs, obs = restore_run(path, cfg, agent, envs)
     else:
         state, (obs, _) = LoopState(), envs.reset(seed=cfg.seed)
+    async_envs: Any = envs  # with overlap: step_async / step_wait (overlap_enabled checked them)
     log = RunLog(path, cfg, state, resumed=cfg.resume)
     try:
         while state.global_step < cfg.total_steps:
             actions = agent.act(obs, state.global_step)
-            next_obs, rewards, terminated, truncated, info = envs.step(actions)
+            prev_step, state.global_step = state.global_step, state.global_step + cfg.num_envs
+            if overlap:  # the games step on their threads while the updates owed are made
+                async_envs.step_async(actions)
+                metrics = agent.learn(state.global_step)
+                next_obs, rewards, terminated, truncated, info = async_envs.step_wait()
+            else:
+                next_obs, rewards, terminated, truncated, info = envs.step(actions)
             final_obs = final_observations(info, cfg.num_envs)
             agent.observe(VectorStep(obs, actions, rewards, terminated, truncated, final_obs))
             obs = next_obs
-            prev_step, state.global_step = state.global_step, state.global_step + cfg.num_envs
-            metrics = agent.learn(state.global_step)
+            if not overlap:
+                metrics = agent.learn(state.global_step)
             for callback in callbacks:
                 callback.on_step(state.global_step, info, agent)
             log.step(state, info, metrics, agent)

@@ -289,3 +289,93 @@ def test_the_factory_picks_the_backend_the_config_names() -> None:
     envs = make_vector_env(cfg, seed=0)
     assert not isinstance(envs, EnvpoolAtariVector)
     envs.close()
+
+
+def test_step_async_then_wait_is_the_same_step() -> None:
+    """Two pools with one seed: one stepped by step(), the other by step_async + step_wait
+    (life losses and game ends included), give the same observations, rewards and flags."""
+    cfg = make_config("ddqn", "ALE/Breakout-v5", num_envs=3)
+    a, b = envpool_of(cfg, max_episode_steps=80), envpool_of(cfg, max_episode_steps=80)
+    oa, _ = a.reset(seed=5)
+    ob, _ = b.reset(seed=5)
+    assert np.array_equal(oa, ob)
+    rng = np.random.default_rng(0)
+    ended = 0
+    for _ in range(200):
+        actions = rng.integers(0, 4, 3)
+        ra = a.step(actions)
+        b.step_async(actions)
+        rb = b.step_wait()
+        for x, y in zip(ra[:4], rb[:4], strict=True):
+            assert np.array_equal(x, y)
+        ended += int(np.sum(ra[2] | ra[3]))
+    assert ended >= 3
+    with pytest.raises(RuntimeError, match="without a step_async"):
+        b.step_wait()
+    b.step_async(np.zeros(3, int))
+    with pytest.raises(RuntimeError, match="before step_wait"):
+        b.step_async(np.zeros(3, int))
+    b.reset(seed=6)  # collects the step in flight, then remakes the pool
+    b.step(np.zeros(3, int))
+    a.close()
+    b.close()
+
+
+def test_overlap_updates_while_the_games_step(
+    tmp_path: Path, monkeypatch: pytest.MonkeyPatch, tiny_config: Any
+) -> None:
+    """overlap_env on: each vector step's updates come after step_async and before the step's
+    transitions are stored; with no updates in the run, the replay is the same as without it."""
+    train_module = importlib.import_module("farsighter.train")
+    monkeypatch.setattr(
+        train_module, "make_vector_env", lambda cfg, seed: envpool_of(cfg, seed=seed)
+    )
+    from farsighter.agents.ddqn import DDQNAgent
+
+    events: list[str] = []
+    replays: dict[str, Any] = {}
+    for name in ("observe", "learn"):
+        original = getattr(DDQNAgent, name)
+
+        def spy(self: Any, *args: Any, _f: Any = original, _n: str = name) -> Any:
+            events.append(_n)
+            return _f(self, *args)
+
+        monkeypatch.setattr(DDQNAgent, name, spy)
+
+    class Keep:
+        def on_step(self, global_step: int, info: Any, agent: Any) -> None:
+            pass
+
+        def on_finish(self, run_dir: Path, agent: Any) -> None:
+            replays[run_dir.name] = agent.replay
+
+    def run(overlap: str, learning_starts: int) -> dict[str, Any]:
+        events.clear()
+        cfg = tiny_config(
+            "ddqn",
+            tmp_path / f"{overlap}{learning_starts}",
+            env="ALE/Breakout-v5",
+            num_envs=2,
+            total_steps=300,
+            learning_starts=learning_starts,
+            buffer_size=2_000,
+            batch_size=8,
+            train_every=4,
+            eval_every=0,
+            eval_episodes=1,
+            eval_max_steps=50,
+            device="cpu",
+            overlap_env=overlap,
+        )
+        return farsighter.train(cfg, callbacks=[Keep()])
+
+    summary = run("on", 100)
+    assert summary["global_step"] == 300
+    assert events[:2] == ["learn", "observe"] and "observe" not in events[::2]
+    run("on", 1_000)  # no updates: the order cannot change what is stored
+    run("off", 1_000)
+    assert events[:2] == ["observe", "learn"]
+    on, off = replays["on1000"], replays["off1000"]
+    assert np.array_equal(on.count, off.count) and np.array_equal(on.frames, off.frames)
+    assert np.array_equal(on.actions, off.actions) and np.array_equal(on.flags, off.flags)

@@ -208,3 +208,28 @@ def test_resume_without_replay_refills_before_updating(
     if "adaptive_k__enabled" in extra:
         assert saved["counters"]["k"] > tiny(algo, run, **extra).k  # k moved before the save
         assert watch.seen[0][2] == saved["counters"]["k"]  # and came back with the checkpoint
+
+
+def test_overlap_env_needs_environments_that_step_asynchronously(tmp_path: Path) -> None:
+    import gymnasium as gym
+
+    from farsighter.errors import ConfigError
+    from farsighter.train import overlap_enabled
+
+    sync = gym.vector.SyncVectorEnv([lambda: gym.make("CartPole-v1")])
+
+    class Async:
+        def step_async(self, actions: object) -> None: ...
+
+        def step_wait(self) -> None: ...
+
+    cpu, cuda = torch.device("cpu"), torch.device("cuda")
+    assert not overlap_enabled("auto", sync, cuda) and not overlap_enabled("off", sync, cpu)
+    assert overlap_enabled("auto", Async(), cuda) and not overlap_enabled("auto", Async(), cpu)
+    assert overlap_enabled("on", Async(), cpu) and not overlap_enabled("off", Async(), cuda)
+    with pytest.raises(ConfigError, match="overlap_env on needs environments"):
+        overlap_enabled("on", sync, cpu)
+    with pytest.raises(ConfigError, match="overlap_env on needs"):  # before the run dir exists
+        farsighter.train(tiny("ddqn", tmp_path / "run", overlap_env="on"))
+    assert not (tmp_path / "run").exists()
+    sync.close()

@@ -212,6 +212,7 @@ class EnvpoolAtariVector(gym.vector.VectorEnv):
         self._noop = np.zeros(e, dtype=np.int32)
         self._all = np.arange(e, dtype=np.int32)
         self._needs_reset = True
+        self._pending = False  # a step_async awaits its step_wait
 
     # ------------------------------------------------------------------ envpool
     def _make_pool(self, seed: int) -> Any:
@@ -254,6 +255,9 @@ class EnvpoolAtariVector(gym.vector.VectorEnv):
         """New games everywhere. envpool fixes seeds when it is made, so a seed (environment
         ``e`` gets ``seed + e``, as SyncVectorEnv) remakes the pool unless it is still fresh
         with that seed."""
+        if self._pending:  # collect the step in flight before the pool is reset or remade
+            self._pool.recv(reset=False, return_info=True)
+            self._pending = False
         if seed is not None:
             base = int(seed[0]) if isinstance(seed, (list, tuple)) else int(seed)
             if not (self._fresh and base == self._seed):
@@ -271,11 +275,27 @@ class EnvpoolAtariVector(gym.vector.VectorEnv):
     def step(
         self, actions: Any
     ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray, dict[str, Any]]:
+        self.step_async(actions)
+        return self.step_wait()
+
+    def step_async(self, actions: Any) -> None:
+        """Start a step: the games run on envpool's threads until :meth:`step_wait` collects
+        it, so the caller can work meanwhile (the training loop's ``overlap_env``)."""
         if self._needs_reset:
             raise gym.error.ResetNeeded("call reset() before step()")
+        if self._pending:
+            raise RuntimeError("step_async called again before step_wait collected the last step")
         self._fresh = False
         actions_E = np.asarray(actions, dtype=np.int32).reshape(self.num_envs)
-        obs, _, _, trunc, info = self._pool.step(actions_E, self._all)
+        self._pool.send(actions_E, self._all)
+        self._pending = True
+
+    def step_wait(self) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray, dict[str, Any]]:
+        """The step started by :meth:`step_async` (the contract of :meth:`step`)."""
+        if not self._pending:
+            raise RuntimeError("step_wait called without a step_async before it")
+        self._pending = False
+        obs, _, _, trunc, info = self._pool.recv(reset=False, return_info=True)
         frame, raw, game_over, trunc, lives = self._by_env(
             info, obs[:, -1], info["reward"], info["terminated"], trunc, info["lives"]
         )
