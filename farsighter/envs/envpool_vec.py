@@ -28,6 +28,7 @@ from __future__ import annotations
 
 import importlib.util
 import time
+from concurrent.futures import Future, ThreadPoolExecutor
 from typing import Any
 
 import gymnasium as gym
@@ -212,7 +213,8 @@ class EnvpoolAtariVector(gym.vector.VectorEnv):
         self._noop = np.zeros(e, dtype=np.int32)
         self._all = np.arange(e, dtype=np.int32)
         self._needs_reset = True
-        self._pending = False  # a step_async awaits its step_wait
+        self._pending: Future[Any] | None = None  # a step_async awaiting its step_wait
+        self._worker: ThreadPoolExecutor | None = None  # made by the first step_async
 
     # ------------------------------------------------------------------ envpool
     def _make_pool(self, seed: int) -> Any:
@@ -255,9 +257,8 @@ class EnvpoolAtariVector(gym.vector.VectorEnv):
         """New games everywhere. envpool fixes seeds when it is made, so a seed (environment
         ``e`` gets ``seed + e``, as SyncVectorEnv) remakes the pool unless it is still fresh
         with that seed."""
-        if self._pending:  # collect the step in flight before the pool is reset or remade
-            self._pool.recv(reset=False, return_info=True)
-            self._pending = False
+        if self._pending is not None:  # finish the step in flight before a reset or remake
+            self.step_wait()
         if seed is not None:
             base = int(seed[0]) if isinstance(seed, (list, tuple)) else int(seed)
             if not (self._fresh and base == self._seed):
@@ -275,27 +276,39 @@ class EnvpoolAtariVector(gym.vector.VectorEnv):
     def step(
         self, actions: Any
     ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray, dict[str, Any]]:
-        self.step_async(actions)
-        return self.step_wait()
+        if self._pending is not None:
+            raise RuntimeError("step called while a step_async awaits its step_wait")
+        return self._step(self._actions(actions))
 
     def step_async(self, actions: Any) -> None:
-        """Start a step: the games run on envpool's threads until :meth:`step_wait` collects
-        it, so the caller can work meanwhile (the training loop's ``overlap_env``)."""
-        if self._needs_reset:
-            raise gym.error.ResetNeeded("call reset() before step()")
-        if self._pending:
+        """Start a step on a worker thread and return: the games (and the no-op step of a new
+        life, and the resets of ended games) run while the caller works, until
+        :meth:`step_wait` collects the step (the training loop's ``overlap_env``). envpool's
+        emulation runs without Python's lock; the bookkeeping here takes it briefly."""
+        if self._pending is not None:
             raise RuntimeError("step_async called again before step_wait collected the last step")
-        self._fresh = False
-        actions_E = np.asarray(actions, dtype=np.int32).reshape(self.num_envs)
-        self._pool.send(actions_E, self._all)
-        self._pending = True
+        actions_E = self._actions(actions)
+        if self._worker is None:
+            self._worker = ThreadPoolExecutor(1, thread_name_prefix="envpool-step")
+        self._pending = self._worker.submit(self._step, actions_E)
 
     def step_wait(self) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray, dict[str, Any]]:
         """The step started by :meth:`step_async` (the contract of :meth:`step`)."""
-        if not self._pending:
+        if self._pending is None:
             raise RuntimeError("step_wait called without a step_async before it")
-        self._pending = False
-        obs, _, _, trunc, info = self._pool.recv(reset=False, return_info=True)
+        pending, self._pending = self._pending, None
+        return pending.result()
+
+    def _actions(self, actions: Any) -> np.ndarray:
+        if self._needs_reset:
+            raise gym.error.ResetNeeded("call reset() before step()")
+        return np.asarray(actions, dtype=np.int32).reshape(self.num_envs)
+
+    def _step(
+        self, actions_E: np.ndarray
+    ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray, dict[str, Any]]:
+        self._fresh = False
+        obs, _, _, trunc, info = self._pool.step(actions_E, self._all)
         frame, raw, game_over, trunc, lives = self._by_env(
             info, obs[:, -1], info["reward"], info["terminated"], trunc, info["lives"]
         )
@@ -361,6 +374,11 @@ class EnvpoolAtariVector(gym.vector.VectorEnv):
         }
 
     def close_extras(self, **kwargs: Any) -> None:
+        if self._pending is not None:
+            self.step_wait()
+        if self._worker is not None:
+            self._worker.shutdown()
+            self._worker = None
         if self._pool is not None:
             self._pool.close()
             self._pool = None
