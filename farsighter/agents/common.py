@@ -70,9 +70,9 @@ def make_replay(
     )
 
 
-def uses_gpu_replay(cfg: Config, device: torch.device | None) -> bool:
+def uses_gpu_replay(cfg: Config, device: torch.device | str | None) -> bool:
     """``cfg.gpu_replay`` auto on a CUDA device."""
-    return device is not None and device.type == "cuda" and cfg.gpu_replay == "auto"
+    return device is not None and torch.device(device).type == "cuda" and cfg.gpu_replay == "auto"
 
 
 def obs_tensor(obs: np.ndarray | torch.Tensor, device: torch.device) -> torch.Tensor:
