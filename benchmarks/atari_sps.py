@@ -477,7 +477,7 @@ def main() -> None:
     warmup = args.warmup if args.warmup is not None else (10_000 if gpu else 2_000)
     steps = args.measure if args.measure is not None else (30_000 if gpu else 4_000)
     learning_starts = args.learning_starts if args.learning_starts is not None else warmup
-    num_envs = args.num_envs or ([1, 8, 16] if gpu else [1, 4])
+    num_envs = args.num_envs or ([1, 16, 32, 64] if gpu else [1, 4])
     backend = args.backend or ("envpool" if gpu else "gymnasium")
     if learning_starts > warmup:
         raise SystemExit("--learning-starts must not exceed --warmup: the window must train")

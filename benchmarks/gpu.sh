@@ -5,7 +5,7 @@
 # sure torch is a CUDA build (PyPI's Linux wheel is; a CPU-only one is replaced from
 # TORCH_INDEX_URL, default the CUDA 12.8 index), then writes
 #   benchmarks/results/update_profile_gpu.json  (one DDQN update: fp32 NCHW, channels-last, bf16)
-#   benchmarks/results/atari_sps_gpu.json       (Breakout steps/s, envpool, E = 1 8 16; goal 3000)
+#   benchmarks/results/atari_sps_gpu.json       (Breakout steps/s, envpool, E = 1 16 32 64; goal 3000)
 # CLEANRL_DIR, a CleanRL checkout (cleanrl/dqn_atari.py, cleanrl_utils/), adds its DQN beside.
 set -euo pipefail
 cd "$(dirname "$0")/.."
