@@ -287,8 +287,9 @@ class Config:
     gpu_replay: Literal["auto", "off"] = "auto"
     """auto: on a CUDA device, the replay's observations are also kept in GPU memory and
     minibatches are stacked there, so only row indices cross from the host per update (one byte
-    per pixel: 0.7 GB of GPU memory per 100k Atari frames, 7 GB for a 1M buffer); off: stacked
-    on the host and copied. The minibatches are the same either way."""
+    per pixel: 0.7 GB of GPU memory per 100k Atari frames, 7 GB for a 1M buffer), when that fits
+    in half the GPU's free memory (else on the host, with a warning); off: stacked on the host
+    and copied. The minibatches are the same either way."""
     compile: bool = False
     """torch.compile the update step (forward, target, loss, backward, clip, optimizer) of
     ddqn, kddqn, bdqn and farsighter (farsighter.agents.cuda_graph.wrap_step): fused

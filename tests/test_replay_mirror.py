@@ -5,12 +5,13 @@ an agent with it on a GPU when one is present."""
 
 from __future__ import annotations
 
+import gymnasium as gym
 import numpy as np
 import pytest
 import torch
 
 from farsighter import make_config
-from farsighter.agents.common import make_replay, uses_gpu_replay
+from farsighter.agents.common import make_replay, row_bytes, uses_gpu_replay
 from farsighter.config import validate
 from farsighter.errors import ConfigError
 from farsighter.replay import ReplayBuffer
@@ -94,14 +95,22 @@ def test_stacking_without_a_mirror_on_device_is_refused() -> None:
 def test_agents_mirror_only_on_cuda_with_gpu_replay_auto() -> None:
     cfg = make_config("ddqn", "CartPole-v1")
     assert not uses_gpu_replay(cfg, torch.device("cpu"))
-    assert uses_gpu_replay(cfg, torch.device("cuda"))
-    assert not uses_gpu_replay(
-        make_config("ddqn", "CartPole-v1", gpu_replay="off"), torch.device("cuda")
-    )
-    import gymnasium as gym
-
+    assert uses_gpu_replay(cfg, torch.device("cuda"), 16, free_bytes=2**30)
+    off = make_config("ddqn", "CartPole-v1", gpu_replay="off")
+    assert not uses_gpu_replay(off, torch.device("cuda"), 16, free_bytes=2**30)
     space = gym.spaces.Box(0, 1, (4,), np.float32)
     assert make_replay(cfg, space, 1, seed=0, device=torch.device("cpu")).mirror is None
+
+
+def test_gpu_replay_auto_leaves_out_a_mirror_that_does_not_fit() -> None:
+    cfg = make_config("ddqn", "ALE/Breakout-v5", buffer_size=1_000_000)
+    frames = gym.spaces.Box(0, 255, (4, 84, 84), np.uint8)
+    row = row_bytes(frames, 4)
+    assert row == 84 * 84
+    cuda = torch.device("cuda")
+    assert uses_gpu_replay(cfg, cuda, row, free_bytes=20 * 2**30)  # 6.6 GiB of 20 free
+    with pytest.warns(UserWarning, match="gathered on the host"):
+        assert not uses_gpu_replay(cfg, cuda, row, free_bytes=10 * 2**30)
 
 
 def test_bad_gpu_replay_value_is_refused() -> None:

@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import copy
 import dataclasses
+import warnings
 from collections.abc import Iterable, Sequence
 from dataclasses import dataclass
 from typing import Any
@@ -66,13 +67,43 @@ def make_replay(
         action_shape=action_shape,
         action_dtype=action_dtype,
         seed=seed,
-        device=device if uses_gpu_replay(cfg, device) else None,
+        device=device if uses_gpu_replay(cfg, device, row_bytes(obs_space, frame_stack)) else None,
     )
 
 
-def uses_gpu_replay(cfg: Config, device: torch.device | str | None) -> bool:
-    """``cfg.gpu_replay`` auto on a CUDA device."""
-    return device is not None and torch.device(device).type == "cuda" and cfg.gpu_replay == "auto"
+def row_bytes(obs_space: gym.spaces.Box, frame_stack: int) -> int:
+    """Bytes of one replay row: one frame of a stack, or the whole observation."""
+    assert obs_space.shape is not None
+    return int(np.prod(obs_space.shape)) // frame_stack * obs_space.dtype.itemsize
+
+
+MIRROR_SHARE = 0.5  # gpu_replay auto mirrors only what fits in this share of the free GPU memory
+
+
+def uses_gpu_replay(
+    cfg: Config,
+    device: torch.device | str | None,
+    row_bytes: int = 0,
+    free_bytes: int | None = None,
+) -> bool:
+    """``cfg.gpu_replay`` auto on a CUDA device, when the mirror (``buffer_size`` rows of
+    ``row_bytes``) fits in half the device's free memory (``free_bytes``, asked of the device
+    when not given). A mirror that does not fit is left out with a warning (several runs sharing
+    one GPU with big buffers): the minibatches are the same, gathered on the host."""
+    if device is None or torch.device(device).type != "cuda" or cfg.gpu_replay != "auto":
+        return False
+    need = cfg.buffer_size * row_bytes
+    if free_bytes is None:
+        free_bytes = torch.cuda.mem_get_info(torch.device(device))[0]
+    if need <= MIRROR_SHARE * free_bytes:
+        return True
+    warnings.warn(
+        f"gpu_replay: the replay's frames need {need / 2**30:.1f} GiB, more than half of the "
+        f"GPU's free {free_bytes / 2**30:.1f} GiB; minibatches are gathered on the host "
+        "(a smaller --buffer-size keeps them on the GPU)",
+        stacklevel=2,
+    )
+    return False
 
 
 def obs_tensor(obs: np.ndarray | torch.Tensor, device: torch.device) -> torch.Tensor:
