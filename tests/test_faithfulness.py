@@ -309,8 +309,8 @@ def test_stride_refresh_uses_one_tuple_per_k(tmp_path: Path) -> None:
     seen: list[np.ndarray] = []
     inner = agent.replay.sample_indices
 
-    def spy(e: np.ndarray, s: np.ndarray, k: int, gamma: float, stride: int = 1) -> Any:
-        batch = inner(e, s, k, gamma, stride=stride)
+    def spy(e: np.ndarray, s: np.ndarray, k: int, gamma: float, **kw: Any) -> Any:
+        batch = inner(e, s, k, gamma, **kw)
         seen.append(agent.replay.t_ep[batch.env_index, batch.index % agent.replay.capacity])
         return batch
 
