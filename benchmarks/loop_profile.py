@@ -210,11 +210,7 @@ def main() -> None:
     write_result(
         name,
         {
-            "algo": args.algo,
-            "device": args.device,
-            "num_envs": args.num_envs,
-            "precision": args.precision,
-            "threads": args.threads,
+            **run_fields(args),
             "steps": steps,
             "sps_under_profiler": round(steps / wall, 2),
             "ms_per_step_under_profiler": round(1000 * wall / steps, 4),
@@ -224,6 +220,18 @@ def main() -> None:
             ],
         },
     )
+
+
+def run_fields(args: argparse.Namespace) -> dict[str, Any]:
+    """What a result file records of the run it profiled."""
+    return {
+        "algo": args.algo,
+        "device": args.device,
+        "num_envs": args.num_envs,
+        "precision": args.precision,
+        "cuda_graph": args.cuda_graph,
+        "threads": args.threads,
+    }
 
 
 def phases(args: argparse.Namespace, spec: dict[str, Any]) -> None:
@@ -251,12 +259,7 @@ def phases(args: argparse.Namespace, spec: dict[str, Any]) -> None:
     write_result(
         name,
         {
-            "algo": args.algo,
-            "device": args.device,
-            "num_envs": args.num_envs,
-            "precision": args.precision,
-            "cuda_graph": args.cuda_graph,
-            "threads": args.threads,
+            **run_fields(args),
             "steps": steps,
             "sps": round(steps / wall, 2),
             "ms_per_env_step": table,

@@ -246,6 +246,24 @@ def test_seeds_and_pickling() -> None:
     env.close()
 
 
+def breakout_run(tiny_config: Any, run_dir: Path, **kw: Any) -> Config:
+    """A short DDQN run on two Breakout games (the envpool factory hook set by the caller)."""
+    return tiny_config(
+        "ddqn",
+        run_dir,
+        env="ALE/Breakout-v5",
+        num_envs=2,
+        buffer_size=2_000,
+        batch_size=8,
+        train_every=4,
+        eval_every=0,
+        eval_episodes=1,
+        eval_max_steps=50,
+        device="cpu",
+        **kw,
+    )
+
+
 def test_training_loop_runs_on_envpool(
     tmp_path: Path, monkeypatch: pytest.MonkeyPatch, tiny_config: Any
 ) -> None:
@@ -254,21 +272,7 @@ def test_training_loop_runs_on_envpool(
     monkeypatch.setattr(
         train_module, "make_vector_env", lambda cfg, seed: envpool_of(cfg, seed=seed)
     )
-    cfg = tiny_config(
-        "ddqn",
-        tmp_path / "run",
-        env="ALE/Breakout-v5",
-        num_envs=2,
-        total_steps=400,
-        learning_starts=200,
-        buffer_size=2_000,
-        batch_size=8,
-        train_every=4,
-        eval_every=0,
-        eval_episodes=1,
-        eval_max_steps=50,
-        device="cpu",
-    )
+    cfg = breakout_run(tiny_config, tmp_path / "run", total_steps=400, learning_starts=200)
     summary = farsighter.train(cfg)
     assert summary["global_step"] == 400 and summary["episodes"] >= 1
 
@@ -352,20 +356,11 @@ def test_overlap_updates_while_the_games_step(
 
     def run(overlap: str, learning_starts: int) -> dict[str, Any]:
         events.clear()
-        cfg = tiny_config(
-            "ddqn",
+        cfg = breakout_run(
+            tiny_config,
             tmp_path / f"{overlap}{learning_starts}",
-            env="ALE/Breakout-v5",
-            num_envs=2,
             total_steps=300,
             learning_starts=learning_starts,
-            buffer_size=2_000,
-            batch_size=8,
-            train_every=4,
-            eval_every=0,
-            eval_episodes=1,
-            eval_max_steps=50,
-            device="cpu",
             overlap_env=overlap,
         )
         return farsighter.train(cfg, callbacks=[Keep()])
