@@ -17,6 +17,7 @@ from torch import nn
 from farsighter.config import AdaptiveKConfig, Config
 from farsighter.ops.adaptive_k import after_refresh
 from farsighter.replay import Batch, ReplayBuffer
+from farsighter.replay.buffer import host_to_device
 
 
 def make_optimizer(params: Iterable[nn.Parameter], cfg: Config) -> torch.optim.Optimizer:
@@ -83,16 +84,16 @@ MIRROR_SHARE = 0.5  # gpu_replay auto mirrors only what fits in this share of th
 def uses_gpu_replay(
     cfg: Config,
     device: torch.device | str | None,
-    row_bytes: int = 0,
+    bytes_per_row: int = 0,
     free_bytes: int | None = None,
 ) -> bool:
     """``cfg.gpu_replay`` auto on a CUDA device, when the mirror (``buffer_size`` rows of
-    ``row_bytes``) fits in half the device's free memory (``free_bytes``, asked of the device
+    ``bytes_per_row``) fits in half the device's free memory (``free_bytes``, asked of the device
     when not given). A mirror that does not fit is left out with a warning (several runs sharing
     one GPU with big buffers): the minibatches are the same, gathered on the host."""
     if device is None or torch.device(device).type != "cuda" or cfg.gpu_replay != "auto":
         return False
-    need = cfg.buffer_size * row_bytes
+    need = cfg.buffer_size * bytes_per_row
     if free_bytes is None:
         free_bytes = torch.cuda.mem_get_info(torch.device(device))[0]
     if need <= MIRROR_SHARE * free_bytes:
@@ -121,10 +122,7 @@ def to_device(
     tensor already on a GPU (a replay's device mirror) is not copied again."""
     if isinstance(x, torch.Tensor) and x.device.type != "cpu":
         return x.to(device=device, dtype=dtype)  # no copy when already there ("cuda" = "cuda:0")
-    t = torch.as_tensor(x, dtype=dtype)
-    if torch.device(device).type != "cuda":
-        return t
-    return t.pin_memory().to(device, non_blocking=True)
+    return host_to_device(torch.as_tensor(x, dtype=dtype), device)
 
 
 @dataclass(frozen=True)

@@ -455,9 +455,7 @@ class BLRHead:
         for lo in range(0, phi_BD.shape[0], step):
             phiu_KAD = (phi_BD[lo : lo + step] @ self._sqrt_cov32_DX).view(-1, a, d)
             if z_BAD is None:
-                z_KAD = torch.randn(
-                    phiu_KAD.shape, generator=generator, device=self.device, dtype=torch.float32
-                )
+                z_KAD = self._normals(phiu_KAD.shape[0], generator)
             else:
                 z_KAD = z_BAD[lo : lo + step]
             noise_BA[lo : lo + step] = scale * (phiu_KAD * z_KAD).sum(-1)
@@ -466,17 +464,14 @@ class BLRHead:
     def noise_z(self, rows: int, generator: torch.Generator | None = None) -> torch.Tensor:
         """The standard normals ``q_noise`` draws for ``rows`` rows, shape (rows, A, D), drawn block
         by block as it draws them (the same numbers from the same generator state)."""
-        a, d, step = self.num_actions, self.dim, self._block_rows()
-        blocks = [
-            torch.randn(
-                (min(step, rows - lo), a, d),
-                generator=generator,
-                device=self.device,
-                dtype=torch.float32,
-            )
-            for lo in range(0, rows, step)
-        ]
+        step = self._block_rows()
+        blocks = [self._normals(min(step, rows - lo), generator) for lo in range(0, rows, step)]
         return blocks[0] if len(blocks) == 1 else torch.cat(blocks)
+
+    def _normals(self, rows: int, generator: torch.Generator | None) -> torch.Tensor:
+        """One block of standard normals, shape (rows, A, D)."""
+        shape = (rows, self.num_actions, self.dim)
+        return torch.randn(shape, generator=generator, device=self.device, dtype=torch.float32)
 
     @torch.no_grad()
     def sample_weights(self, n: int, generator: torch.Generator | None = None) -> torch.Tensor:

@@ -221,8 +221,10 @@ class ReplayBuffer:
         """Copy the host rows ``flat_N`` (flat ``e * capacity + slot``) into the device mirror."""
         assert self.mirror is not None
         rows = self.frames.reshape(-1, *self.frame_shape)[flat_N]
-        index = _to(torch.from_numpy(flat_N), self.mirror.device)
-        self.mirror.index_copy_(0, index, _to(torch.from_numpy(rows), self.mirror.device))
+        index = host_to_device(torch.from_numpy(flat_N), self.mirror.device)
+        self.mirror.index_copy_(
+            0, index, host_to_device(torch.from_numpy(rows), self.mirror.device)
+        )
 
     def clear(self) -> None:
         """Forget every row (Algorithm 1 line 7 empties the buffer when k changes).
@@ -356,16 +358,12 @@ class ReplayBuffer:
 
     def stacked_obs(self, e_B: np.ndarray, logical_B: np.ndarray) -> np.ndarray:
         """Observation at logical rows, rebuilding frame stacks with zeros before episode start."""
-        slot_B = logical_B % self.capacity
+        flat_BS = self.stack_rows(e_B, logical_B)
         if self.frame_stack == 1:
-            return self.frames[e_B, slot_B]
-        s = self.frame_stack
-        t_B = self.t_ep[e_B, slot_B].astype(np.int64)
-        back_S = np.arange(s - 1, -1, -1)  # oldest first
-        rows_BS = (logical_B[:, None] - back_S[None, :]) % self.capacity
-        out = self.frames[e_B[:, None], rows_BS]  # (B, S, *frame)
-        before_start_BS = back_S[None, :] > t_B[:, None]
-        out[before_start_BS] = 0
+            return self.frames.reshape(-1, *self.frame_shape)[flat_BS[:, 0]]
+        padding_BS = flat_BS == self.num_envs * self.capacity  # the mirror's zero row
+        out = self.frames.reshape(-1, *self.frame_shape)[np.where(padding_BS, 0, flat_BS)]
+        out[padding_BS] = 0
         return out
 
     def stack_rows(self, e_B: np.ndarray, logical_B: np.ndarray) -> np.ndarray:
@@ -388,7 +386,7 @@ class ReplayBuffer:
         if self.mirror is None:
             raise ValueError("this replay keeps no device mirror (made without a device)")
         flat_BS = torch.from_numpy(self.stack_rows(e_B, logical_B))
-        out = self.mirror[_to(flat_BS, self.mirror.device)]  # (B, S, *frame)
+        out = self.mirror[host_to_device(flat_BS, self.mirror.device)]  # (B, S, *frame)
         return out[:, 0] if self.frame_stack == 1 else out
 
     def recent_indices(self, n: int) -> tuple[np.ndarray, np.ndarray]:
@@ -522,9 +520,9 @@ class ReplayBuffer:
                 self._to_mirror(np.arange(lo, min(lo + MIRROR_CHUNK, rows), dtype=np.int64))
 
 
-def _to(x: torch.Tensor, device: torch.device) -> torch.Tensor:
-    """``x`` on ``device``; to a GPU through pinned memory and a non-blocking copy (ordered
-    before the kernels that read it on the same stream)."""
-    if device.type != "cuda":
+def host_to_device(x: torch.Tensor, device: torch.device | str) -> torch.Tensor:
+    """A host tensor on ``device``: as it is on the CPU; to a GPU through pinned memory and a
+    non-blocking copy (ordered before the kernels that read it on the same stream)."""
+    if torch.device(device).type != "cuda":
         return x
     return x.pin_memory().to(device, non_blocking=True)
