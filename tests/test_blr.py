@@ -7,6 +7,7 @@ import pytest
 import torch
 
 from farsighter.ops.blr import (
+    ThompsonDraws,
     BLRHead,
     blr_posterior,
     cholesky_jitter,
@@ -198,6 +199,59 @@ def test_sample_weights_moments_and_independence() -> None:
             if a != b:
                 block = corr[a * 4 : (a + 1) * 4, b * 4 : (b + 1) * 4]
                 assert np.abs(block).max() < 0.05
+
+
+def test_thompson_draws_are_the_posterior_each_used_once_in_order() -> None:
+    head = _fitted_head(cov_scale=1.7)
+    draws = ThompsonDraws(head, block=64)
+    gen = torch.Generator().manual_seed(6)
+    taken = torch.cat([draws.take(3, gen) for _ in range(21 * 333)])  # 21 takes per block of 63
+    assert taken.shape == (3 * 21 * 333, 3, 4)
+    # the same numbers as blocks of sample_weights from the same generator state, in order
+    ref = torch.Generator().manual_seed(6)
+    blocks = torch.cat([head.sample_weights(63, ref) for _ in range(333)])
+    assert torch.equal(taken, blocks)
+    assert len({tuple(row) for row in taken[:, 0, :].tolist()}) == len(taken)  # none reused
+    w_NAD, cov_ADD = taken.double().numpy(), head.cov_ADD.numpy()
+    for a in range(3):
+        assert _rel(np.cov(w_NAD[:, a, :], rowvar=False), cov_ADD[a]) < 0.05
+        se = np.sqrt(np.diag(cov_ADD[a]) / len(w_NAD))
+        assert np.all(np.abs(w_NAD[:, a, :].mean(0) - head.mean_AD.double().numpy()[a]) < 5 * se)
+
+
+def test_thompson_draws_follow_a_posterior_change_mid_block() -> None:
+    head = _fitted_head()
+    draws = ThompsonDraws(head, block=256)
+    gen = torch.Generator().manual_seed(0)
+    before = draws.take(1, gen)
+    assert before.abs().max() < 50
+    head.set_mean(torch.full((3, 4), 100.0))  # a new posterior: the rest of the block is stale
+    after = draws.take(1, gen)
+    assert (after - 100.0).abs().max() < 50
+    phi, act, y = _make_data([15, 40, 5], 4, seed=9)
+    head.fit(phi, act, y)  # a refresh
+    assert draws.take(1, gen).abs().max() < 50
+    with pytest.raises(ValueError, match="n must be >= 1"):
+        draws.take(0, gen)
+    with pytest.raises(ValueError, match="block must be >= 1"):
+        ThompsonDraws(head, block=0)
+
+
+def test_thompson_draws_resume_from_their_state() -> None:
+    head = _fitted_head()
+    draws = ThompsonDraws(head, block=10)
+    gen = torch.Generator().manual_seed(3)
+    draws.take(4, gen)
+    saved, gen_state = draws.state_dict(), gen.get_state()
+    head_state = head.state_dict()
+    rest = [draws.take(4, gen) for _ in range(5)]
+
+    other_head = _head(3, 4)
+    other_head.load_state_dict(head_state)
+    other = ThompsonDraws(other_head, block=10)
+    other.load_state_dict(saved)
+    gen.set_state(gen_state)
+    assert all(torch.equal(a, other.take(4, gen)) for a in rest)
 
 
 def test_q_sample_matches_predictive_variance_and_rows_are_independent() -> None:

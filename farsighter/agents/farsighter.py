@@ -64,7 +64,7 @@ from farsighter.agents.cuda_graph import (
 from farsighter.agents.protocol import AgentFactory
 from farsighter.config import Config
 from farsighter.networks import make_torso
-from farsighter.ops.blr import BLRHead, greedy_predictive_variance
+from farsighter.ops.blr import BLRHead, ThompsonDraws, greedy_predictive_variance
 from farsighter.ops.targets import double_q_target
 from farsighter.replay import Batch, VectorStep
 
@@ -117,6 +117,7 @@ class FarsighterAgent:
         )
         self.head.set_mean(init_AD.to(device))
         self.target_mean_AD = self.head.mean_AD.clone()
+        self.draws = ThompsonDraws(self.head)  # the acting draws of blr.redraw = step
         self.opt = make_optimizer(self.torso.parameters(), cfg)
         # The update as a CUDA graph on a GPU (cfg.cuda_graph), or compiled (cfg.compile):
         # farsighter.agents.cuda_graph.
@@ -153,15 +154,16 @@ class FarsighterAgent:
     def _thompson_q(self, phi_ED: torch.Tensor) -> torch.Tensor:
         blr, c = self.cfg.blr, self.counters
         n = phi_ED.shape[0]
-        if blr.redraw == "step" and blr.target != "thompson":
-            # Algorithm 2 line 2: a fresh z at every step, without forming weight matrices.
-            c.draws += n
-            return self.head.q_sample(phi_ED, generator=self.gen)
-        # Held draws; with blr.target = thompson the Q-loss reuses the acting draw, so a per-step
-        # draw is also made explicit here.
         if blr.redraw == "step":
-            self.redraw_E[:] = True
-        elif blr.redraw in ("every", "k"):
+            # Algorithm 2 line 2: a fresh draw at every step for every environment, made a block
+            # ahead (ThompsonDraws); with blr.target = thompson the Q-loss reuses it.
+            c.draws += n
+            w_EAD = self.draws.take(n, self.gen)
+            if blr.target == "thompson":
+                self.w_EAD = w_EAD.clone()  # not a view: the block is replaced, w_EAD saved
+            return torch.einsum("ed,ead->ea", phi_ED, w_EAD)
+        # Held draws.
+        if blr.redraw in ("every", "k"):
             hold = blr.redraw_every if blr.redraw == "every" else c.k
             if self.w_EAD is None or c.steps_since_draw >= hold:
                 self.redraw_E[:] = True
@@ -397,6 +399,7 @@ class FarsighterAgent:
         "rng",
         "gen",
         "w_EAD",
+        "draws",
         "redraw_E",
         "recent_phi",
         "counters",
