@@ -7,8 +7,8 @@ import pytest
 import torch
 
 from farsighter.ops.blr import (
-    ThompsonDraws,
     BLRHead,
+    ThompsonDraws,
     blr_posterior,
     cholesky_jitter,
     greedy_predictive_variance,
