@@ -67,8 +67,8 @@ class PlainNatureCNN(NatureCNN):
             if isinstance(layer, nn.Conv2d):
                 layer.weight.data = layer.weight.data.contiguous()
 
-    def body(self, obs_BCHW: torch.Tensor) -> torch.Tensor:
-        return self.fc(self.conv(obs_BCHW.float() / 255.0))
+    def prepare(self, obs_BCHW: torch.Tensor) -> torch.Tensor:
+        return obs_BCHW.float() / 255.0
 
 
 class QNet(nn.Module):

@@ -21,8 +21,9 @@ Precision = Literal["fp32", "bf16"]
 
 
 class Torso(nn.Module):
-    """What the torsos share: ``forward`` runs :meth:`body` in the torso's precision and returns
-    float32 features of width ``out_dim``."""
+    """What the torsos share: ``forward`` scales and lays out the observations
+    (:meth:`prepare`), runs :meth:`body` on them in the torso's precision and returns float32
+    features of width ``out_dim``."""
 
     out_dim: int
 
@@ -30,15 +31,21 @@ class Torso(nn.Module):
         super().__init__()
         self.precision: Precision = "fp32"
 
-    def body(self, obs: torch.Tensor) -> torch.Tensor:
+    def prepare(self, obs: torch.Tensor) -> torch.Tensor:
+        """The network's input from a batch of observations. Two torsos of one architecture
+        (an online and a target network) can share it: ``forward(x, prepared=True)``."""
+        return obs
+
+    def body(self, x: torch.Tensor) -> torch.Tensor:
         raise NotImplementedError
 
-    def forward(self, obs: torch.Tensor) -> torch.Tensor:
+    def forward(self, obs: torch.Tensor, prepared: bool = False) -> torch.Tensor:
+        x = obs if prepared else self.prepare(obs)
         if self.precision == "fp32":
-            return self.body(obs)
+            return self.body(x)
         # no cast cache: it would outlive a CUDA graph capture (and a region casts each weight once)
-        with torch.autocast(obs.device.type, dtype=torch.bfloat16, cache_enabled=False):
-            return self.body(obs).float()
+        with torch.autocast(x.device.type, dtype=torch.bfloat16, cache_enabled=False):
+            return self.body(x).float()
 
 
 def set_precision(module: nn.Module, precision: Precision) -> None:
@@ -65,8 +72,11 @@ class MLPTorso(Torso):
         self.net = nn.Sequential(*layers)
         self.out_dim = last
 
-    def body(self, obs_BO: torch.Tensor) -> torch.Tensor:
-        return self.net(obs_BO.float().flatten(1))
+    def prepare(self, obs_BO: torch.Tensor) -> torch.Tensor:
+        return obs_BO.float().flatten(1)
+
+    def body(self, x: torch.Tensor) -> torch.Tensor:
+        return self.net(x)
 
 
 class NatureCNN(Torso):
@@ -92,9 +102,12 @@ class NatureCNN(Torso):
         self.n_flat = int(n_flat)  # width of the convolutions' output (3136 on 84x84 frames)
         self.out_dim = 512
 
-    def body(self, obs_BCHW: torch.Tensor) -> torch.Tensor:
+    def prepare(self, obs_BCHW: torch.Tensor) -> torch.Tensor:
         # uint8 frames are scaled here, so the replay and the acting path keep bytes.
-        return self.fc(self.conv(_channels_last(obs_BCHW.float() / 255.0)))
+        return _channels_last(obs_BCHW.float() / 255.0)
+
+    def body(self, x: torch.Tensor) -> torch.Tensor:
+        return self.fc(self.conv(x))
 
 
 MINATAR_SCREEN = 10
@@ -114,8 +127,11 @@ class MinAtarCNN(Torso):
         self.fc = nn.Sequential(nn.Linear(self.n_flat, self.HIDDEN), nn.ReLU())
         self.out_dim = self.HIDDEN
 
-    def body(self, obs_BCHW: torch.Tensor) -> torch.Tensor:
-        return self.fc(self.conv(obs_BCHW.float()))
+    def prepare(self, obs_BCHW: torch.Tensor) -> torch.Tensor:
+        return obs_BCHW.float()
+
+    def body(self, x: torch.Tensor) -> torch.Tensor:
+        return self.fc(self.conv(x))
 
 
 def is_minatar_shape(shape: tuple[int, ...]) -> bool:
@@ -145,8 +161,20 @@ class QNetwork(nn.Module):
         self.torso = make_torso(obs_space, hidden_sizes)
         self.head = nn.Linear(self.torso.out_dim, num_actions)
 
-    def forward(self, obs: torch.Tensor) -> torch.Tensor:
-        return self.head(self.torso(obs))
+    def prepare(self, obs: torch.Tensor) -> torch.Tensor:
+        return self.torso.prepare(obs)
+
+    def forward(self, obs: torch.Tensor, prepared: bool = False) -> torch.Tensor:
+        return self.head(self.torso(obs, prepared))
+
+
+def online_and_target(
+    online: Torso | QNetwork, target: Torso | QNetwork, obs: torch.Tensor
+) -> tuple[torch.Tensor, torch.Tensor]:
+    """``online(obs), target(obs)`` of two networks of one architecture, with the observations
+    scaled and laid out once (the double-Q target's two forwards over s')."""
+    x = online.prepare(obs)
+    return online(x, prepared=True), target(x, prepared=True)
 
 
 class NatureConvTrunk(Torso):
@@ -159,8 +187,11 @@ class NatureConvTrunk(Torso):
         self.conv = cnn.conv  # NatureCNN's layers, so the two stay identical; its fc is dropped
         self.out_dim = cnn.n_flat
 
-    def body(self, obs_BCHW: torch.Tensor) -> torch.Tensor:
-        return self.conv(_channels_last(obs_BCHW.float() / 255.0))
+    def prepare(self, obs_BCHW: torch.Tensor) -> torch.Tensor:
+        return _channels_last(obs_BCHW.float() / 255.0)
+
+    def body(self, x: torch.Tensor) -> torch.Tensor:
+        return self.conv(x)
 
 
 class MinAtarConvTrunk(Torso):
@@ -173,8 +204,11 @@ class MinAtarConvTrunk(Torso):
         self.conv = cnn.conv  # MinAtarCNN's layers, so the two stay identical; its fc is dropped
         self.out_dim = cnn.n_flat
 
-    def body(self, obs_BCHW: torch.Tensor) -> torch.Tensor:
-        return self.conv(obs_BCHW.float())
+    def prepare(self, obs_BCHW: torch.Tensor) -> torch.Tensor:
+        return obs_BCHW.float()
+
+    def body(self, x: torch.Tensor) -> torch.Tensor:
+        return self.conv(x)
 
 
 def make_trunk(

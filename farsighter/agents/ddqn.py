@@ -37,7 +37,7 @@ from farsighter.agents.cuda_graph import (
 )
 from farsighter.agents.protocol import AgentFactory
 from farsighter.config import Config
-from farsighter.networks import QNetwork
+from farsighter.networks import QNetwork, online_and_target
 from farsighter.ops.targets import double_q_target
 from farsighter.replay import VectorStep
 
@@ -126,9 +126,8 @@ class DDQNAgent:
     def targets(self, t: TensorBatch) -> torch.Tensor:
         """Double-Q target (Eq. 2 with k-step returns): the online network picks the argmax at
         s_{t+n}, the target network evaluates it."""
-        return double_q_target(
-            t.returns_B, t.bootstrap_B, self.q(t.next_obs_B), self.q_target(t.next_obs_B)
-        )
+        q_next_online, q_next_target = online_and_target(self.q, self.q_target, t.next_obs_B)
+        return double_q_target(t.returns_B, t.bootstrap_B, q_next_online, q_next_target)
 
     def diagnostics(self) -> dict[str, float]:
         return {"epsilon": self.epsilon, "k": float(self.counters.k)}

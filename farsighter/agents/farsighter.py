@@ -63,7 +63,7 @@ from farsighter.agents.cuda_graph import (
 )
 from farsighter.agents.protocol import AgentFactory
 from farsighter.config import Config
-from farsighter.networks import make_torso
+from farsighter.networks import make_torso, online_and_target
 from farsighter.ops.blr import BLRHead, ThompsonDraws, greedy_predictive_variance
 from farsighter.ops.targets import double_q_target
 from farsighter.replay import Batch, VectorStep
@@ -240,12 +240,11 @@ class FarsighterAgent:
         latest acting Thompson draw when ``blr.target = thompson`` (the BDQN authors' code).
         ``w_online_AD`` (that draw) and ``z_BAD`` (the normals of ``blr.target = sample``) are
         drawn here unless given (:meth:`_draws`, for the captured update)."""
-        phi_next = self.torso(t.next_obs_B)
+        phi_next, phi_next_target = online_and_target(self.torso, self.torso_target, t.next_obs_B)
         if w_online_AD is None:
             thompson = self.cfg.blr.target == "thompson"
             w_online_AD = self._acting_draw() if thompson else self.head.mean_AD
         q_next_online = phi_next @ w_online_AD.T
-        phi_next_target = self.torso_target(t.next_obs_B)
         q_next_target = phi_next_target @ self.target_mean_AD.T
         if self.cfg.blr.target == "sample":
             noise_BA = self.head.q_noise(phi_next_target, generator=self.gen, z_BAD=z_BAD)

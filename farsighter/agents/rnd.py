@@ -48,7 +48,7 @@ from farsighter.agents.common import (
 )
 from farsighter.agents.protocol import AgentFactory
 from farsighter.config import Config
-from farsighter.networks import QNetwork, make_torso
+from farsighter.networks import QNetwork, make_torso, online_and_target
 from farsighter.ops.targets import double_q_target
 from farsighter.replay import Batch, VectorStep
 
@@ -209,9 +209,8 @@ class RNDAgent:
         returns_B = t.returns_B + cfg.rnd.intrinsic_weight * ri_B
         q_B = self.q(t.obs_B).gather(1, t.actions_B.unsqueeze(1)).squeeze(1)
         with torch.no_grad():
-            y_B = double_q_target(
-                returns_B, t.bootstrap_B, self.q(t.next_obs_B), self.q_target(t.next_obs_B)
-            )
+            q_next_online, q_next_target = online_and_target(self.q, self.q_target, t.next_obs_B)
+            y_B = double_q_target(returns_B, t.bootstrap_B, q_next_online, q_next_target)
         loss = td_loss(q_B, y_B, cfg.loss)
         clip_and_step(loss, list(self.q.parameters()), self.opt, cfg.max_grad_norm)
         self.stats["predictor_loss"] = float(self.train_predictor(t.obs_B))
