@@ -50,3 +50,28 @@ def test_double_q_target_uses_online_argmax_and_target_value() -> None:
     y = double_q_target(torch.tensor([1.0, 2.0]), torch.tensor([0.5, 0.0]), q_online, q_target)
     # row 0: online argmax is action 1, valued by the target net at -1 (not max 30)
     assert torch.allclose(y, torch.tensor([1.0 + 0.5 * -1.0, 2.0]))
+
+
+def test_clip_gradients_gives_clip_grad_norm_s_numbers() -> None:
+    import copy
+
+    from torch import nn
+
+    from farsighter.agents.common import clip_gradients
+
+    torch.manual_seed(0)
+    for scale in (1e-3, 1.0, 100.0):  # below, near and above the bound
+        net = nn.Sequential(nn.Linear(50, 40), nn.ReLU(), nn.Linear(40, 3))
+        other = copy.deepcopy(net)
+        x = torch.randn(16, 50) * scale
+        for n in (net, other):
+            n(x).pow(2).sum().backward()
+        before = nn.utils.get_total_norm([p.grad for p in net.parameters()])
+        nn.utils.clip_grad_norm_(net.parameters(), 10.0)
+        clip_gradients(list(other.parameters()), 10.0)
+        assert all(
+            torch.equal(a.grad, b.grad)
+            for a, b in zip(net.parameters(), other.parameters(), strict=True)
+        )
+        after = nn.utils.get_total_norm([p.grad for p in other.parameters()])
+        assert after <= 10.0 + 1e-4 and (before > 10.0 or torch.equal(after, before))

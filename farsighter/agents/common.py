@@ -179,8 +179,25 @@ def clip_and_step(
     opt.zero_grad(set_to_none=True)
     loss.backward()
     if max_norm > 0:
-        nn.utils.clip_grad_norm_(params, max_norm)
+        clip_gradients(params, max_norm)
     opt.step()
+
+
+def clip_gradients(params: list[nn.Parameter], max_norm: float) -> None:
+    """``nn.utils.clip_grad_norm_``, the same numbers. It multiplies every gradient by
+    min(1, max_norm / (norm + 1e-6)) even when that is 1, so that a GPU never waits to read the
+    norm; on a CPU (outside ``torch.compile``) the norm is already on the host, and the identity
+    pass over every gradient is skipped."""
+    grads = [p.grad for p in params if p.grad is not None]
+    if not grads:
+        return
+    norm = nn.utils.get_total_norm(grads)
+    if norm.device.type != "cpu" or torch.compiler.is_compiling():
+        nn.utils.clip_grads_with_norm_(params, max_norm, norm)
+        return
+    coef = max_norm / (norm + 1e-6)
+    if coef.item() < 1.0:
+        torch._foreach_mul_(grads, coef)
 
 
 def sample_minibatch(replay: ReplayBuffer, cfg: Config, batch_size: int, k: int) -> Batch:
