@@ -132,6 +132,7 @@ def steady_state_config(spec: dict[str, Any], run_dir: str) -> Config:
         compile=spec.get("compile", False),
         overlap_env=spec.get("overlap_env", "auto"),
         gpu_replay=spec.get("gpu_replay", "auto"),
+        target_cache=spec.get("target_cache", "auto"),
         eval_every=0,
         eval_episodes=1,  # the final evaluation is outside the window; keep it short
         eval_max_steps=200,
@@ -172,6 +173,7 @@ def run_one(spec: dict[str, Any]) -> dict[str, Any]:
         "compile": cfg.compile,
         "overlap_env": cfg.overlap_env,
         "gpu_replay": cfg.gpu_replay,
+        "target_cache": cfg.target_cache,
         "threads": torch.get_num_threads(),
         "device": spec["device"],
         "backend": backend,
@@ -451,6 +453,9 @@ def parse_args() -> argparse.Namespace:
     p.add_argument(
         "--gpu-replay", choices=["auto", "off"], default="auto", help="Config.gpu_replay"
     )
+    p.add_argument(
+        "--target-cache", choices=["auto", "off"], default="auto", help="Config.target_cache"
+    )
     p.add_argument("--repeats", type=int, default=1, help="rounds over all configurations")
     p.add_argument("--seed", type=int, default=1)
     p.add_argument("--cleanrl", type=Path, help="CleanRL checkout to measure beside ours")
@@ -499,6 +504,7 @@ def main() -> None:
         "cuda_graph": args.cuda_graph,
         "overlap_env": args.overlap_env,
         "gpu_replay": args.gpu_replay,
+        "target_cache": args.target_cache,
     }
     compiled = [c == "on" for c in args.compile]
     configs = [
@@ -634,6 +640,7 @@ def main() -> None:
                 "compile": args.compile,
                 "overlap_env": args.overlap_env,
                 "gpu_replay": args.gpu_replay,
+                "target_cache": args.target_cache,
                 "repeats": args.repeats,
                 "seed": args.seed,
                 "statistic": "median over rounds",

@@ -154,6 +154,7 @@ def main() -> None:
     p.add_argument("--phases", action="store_true", help="phase timers instead of cProfile")
     p.add_argument("--overlap-env", choices=["auto", "on", "off"], default="auto")
     p.add_argument("--gpu-replay", choices=["auto", "off"], default="auto")
+    p.add_argument("--target-cache", choices=["auto", "off"], default="auto")
     p.add_argument("--name", help="result file (default: loop_profile_<algo>_<device>_e<E>)")
     args = p.parse_args()
 
@@ -176,6 +177,7 @@ def main() -> None:
         "backend": args.backend,
         "overlap_env": args.overlap_env,
         "gpu_replay": args.gpu_replay,
+        "target_cache": args.target_cache,
     }
     if args.phases:
         phases(args, spec)
@@ -230,6 +232,7 @@ def run_fields(args: argparse.Namespace) -> dict[str, Any]:
         "num_envs": args.num_envs,
         "precision": args.precision,
         "cuda_graph": args.cuda_graph,
+        "target_cache": args.target_cache,
         "threads": args.threads,
     }
 

@@ -290,6 +290,14 @@ class Config:
     per pixel: 0.7 GB of GPU memory per 100k Atari frames, 7 GB for a 1M buffer), when that fits
     in half the GPU's free memory (else on the host, with a warning); off: stacked on the host
     and copied. The minibatches are the same either way."""
+    target_cache: Literal["auto", "off"] = "auto"
+    """auto: with ``sample_recent`` and an eager update (no CUDA graph, not compiled), Farsighter
+    and BDQN keep the target network's features of each sampled next state until the next
+    target copy (farsighter.replay.target_cache), so an update runs the target network only
+    over next states not seen since that copy (with Table 1's values each is drawn about 8
+    times per copy). The math is the same; the float rounding can differ from off, as the
+    target network then sees other batch sizes. off: the target network runs over every
+    minibatch."""
     compile: bool = False
     """torch.compile the update step (forward, target, loss, backward, clip, optimizer) of
     ddqn, kddqn, bdqn and farsighter (farsighter.agents.cuda_graph.wrap_step): fused

@@ -47,6 +47,7 @@ RESUMABLE_FIELDS = {
     "cuda_graph",
     "compile",
     "gpu_replay",
+    "target_cache",
     "progress",
     "run_dir",
     "torch_threads",

@@ -67,6 +67,7 @@ from farsighter.networks import make_torso, online_and_target
 from farsighter.ops.blr import BLRHead, ThompsonDraws, greedy_predictive_variance
 from farsighter.ops.targets import double_q_target
 from farsighter.replay import Batch, VectorStep
+from farsighter.replay.target_cache import TargetCache, target_cache_rows
 
 FEATURE_CHUNK = 4_096  # rows per forward pass when computing features for a posterior refresh
 
@@ -127,6 +128,18 @@ class FarsighterAgent:
         set_capturable(self.opt, self.graphs)
         self.step = wrap_step(self._step, self.graphs, cfg.compile)
         self.replay = make_replay(cfg, obs_space, frame_stack, seed=cfg.seed + 1, device=device)
+        # target features of sampled next states, kept until the next target copy (eager only:
+        # a captured or compiled step runs the target network inside it)
+        self.target_cache = (
+            TargetCache(
+                cfg.num_envs,
+                target_cache_rows(cfg),
+                self.torso.out_dim,
+                device,
+            )
+            if cfg.target_cache == "auto" and cfg.sample_recent and not (self.graphs or cfg.compile)
+            else None
+        )
         self.rng = np.random.default_rng(cfg.seed + 2)
         self.gen = torch.Generator(device=device)
         self.gen.manual_seed(cfg.seed + 3)
@@ -218,6 +231,8 @@ class FarsighterAgent:
             self.refresh_posterior()
         if sync_target(c, global_step, cfg.target_update_every, (self.torso, self.torso_target)):
             self.target_mean_AD.copy_(self.head.mean_AD)  # Algorithm 1 line 8
+            if self.target_cache is not None:
+                self.target_cache.clear()
         return metrics
 
     def _sample(self) -> Batch | None:
@@ -233,14 +248,21 @@ class FarsighterAgent:
         t: TensorBatch,
         w_online_AD: torch.Tensor | None = None,
         z_BAD: torch.Tensor | None = None,
+        phi_next_target: torch.Tensor | None = None,
     ) -> torch.Tensor:
         """y = r^k + gamma^k phi_target(s')^T mean_target[a*] (Eq. 8 with k-step returns).
 
         a* is the argmax under the online features and the posterior mean (Eq. 8), or under the
         latest acting Thompson draw when ``blr.target = thompson`` (the BDQN authors' code).
         ``w_online_AD`` (that draw) and ``z_BAD`` (the normals of ``blr.target = sample``) are
-        drawn here unless given (:meth:`_draws`, for the captured update)."""
-        phi_next, phi_next_target = online_and_target(self.torso, self.torso_target, t.next_obs_B)
+        drawn here unless given (:meth:`_draws`, for the captured update); ``phi_next_target``
+        (the target features of s', from the target cache) likewise."""
+        if phi_next_target is None:
+            phi_next, phi_next_target = online_and_target(
+                self.torso, self.torso_target, t.next_obs_B
+            )
+        else:
+            phi_next = self.torso(t.next_obs_B)
         if w_online_AD is None:
             thompson = self.cfg.blr.target == "thompson"
             w_online_AD = self._acting_draw() if thompson else self.head.mean_AD
@@ -277,10 +299,29 @@ class FarsighterAgent:
                 one_returns_B=to_device(one.returns, self.device),
                 one_bootstrap_B=to_device(one.bootstrap, self.device),
             )
+            if self.target_cache is not None:
+                inputs["one_phi_next_target_BD"] = self._target_features(
+                    batch.env_index, batch.index + one.steps, inputs["one_next_obs_B"]
+                )
+        if self.target_cache is not None:
+            inputs["phi_next_target_BD"] = self._target_features(
+                batch.env_index, batch.index + batch.steps, inputs["next_obs_B"]
+            )
         out = self.step({**inputs, **self._draws(len(batch.actions), "one_next_obs_B" in inputs)})
         if self.cfg.blr.mode == "incremental":
             self._accumulate(out["phi_BD"], t.actions_B, out["y_post_B"])
         return out["loss"]
+
+    @torch.no_grad()
+    def _target_features(
+        self, e_B: np.ndarray, next_B: np.ndarray, next_obs_B: torch.Tensor
+    ) -> torch.Tensor:
+        """phi_target(s') of a minibatch's next states (logical rows ``next_B``), through the
+        target cache: the target network runs over the rows not stored since the last copy."""
+        assert self.target_cache is not None
+        return self.target_cache.lookup(
+            e_B, next_B, lambda i: self.torso_target(next_obs_B[torch.from_numpy(i)])
+        )
 
     def _draws(self, rows: int, one_step: bool) -> Tensors:
         """What a target draws, drawn before the update so a captured step takes it as input: the
@@ -301,7 +342,7 @@ class FarsighterAgent:
         target, the loss at the posterior mean, and the optimizer step on theta."""
         t = TensorBatch.of(inputs)
         w = inputs.get("w_online_AD")
-        y_B = self._targets(t, w, inputs.get("z_BAD"))
+        y_B = self._targets(t, w, inputs.get("z_BAD"), inputs.get("phi_next_target_BD"))
         if "one_next_obs_B" in inputs:  # k_target = max
             one = TensorBatch(
                 obs_B=t.obs_B,
@@ -310,7 +351,12 @@ class FarsighterAgent:
                 returns_B=inputs["one_returns_B"],
                 bootstrap_B=inputs["one_bootstrap_B"],
             )
-            y_B = torch.maximum(y_B, self._targets(one, w, inputs.get("one_z_BAD")))
+            y_B = torch.maximum(
+                y_B,
+                self._targets(
+                    one, w, inputs.get("one_z_BAD"), inputs.get("one_phi_next_target_BD")
+                ),
+            )
         phi_BD = self.torso(t.obs_B)
         q_B = (phi_BD @ self.head.mean_AD.T).gather(1, t.actions_B[:, None])[:, 0]
         loss = td_loss(q_B, y_B, self.cfg.loss)
@@ -399,6 +445,7 @@ class FarsighterAgent:
         "gen",
         "w_EAD",
         "draws",
+        "target_cache",
         "redraw_E",
         "recent_phi",
         "counters",
@@ -409,6 +456,8 @@ class FarsighterAgent:
 
     def load_state_dict(self, state: dict[str, Any]) -> None:
         load_state(self, self.SAVED, state)
+        if self.target_cache is not None and state.get("replay") is None:
+            self.target_cache.clear()  # its keys are rows of the replay saved without it
         set_capturable(self.opt, self.graphs)
         reset_step(self.step)  # the optimizer's state tensors are new ones
 

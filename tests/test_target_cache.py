@@ -1,0 +1,85 @@
+"""The target cache: stored rows come back, collisions and clears are misses, and an agent with
+it trains as one without it (same targets up to float rounding, across target copies)."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import numpy as np
+import pytest
+import torch
+
+from farsighter.replay.target_cache import TargetCache
+from tests.test_farsighter_agent import feed, make_agent
+
+
+def _net_rows(e_B: np.ndarray, l_B: np.ndarray) -> torch.Tensor:
+    """A stand-in network: each row's output is a function of its key."""
+    key = torch.from_numpy(e_B * 1000 + l_B).float()
+    return torch.stack([key, -key, key * 0.5], dim=1)
+
+
+def test_lookup_computes_misses_once_and_returns_stored_rows() -> None:
+    cache = TargetCache(num_envs=2, rows_per_env=8, width=3, device=torch.device("cpu"))
+    calls: list[int] = []
+
+    def lookup(e_B: np.ndarray, l_B: np.ndarray) -> torch.Tensor:
+        def compute(i: np.ndarray) -> torch.Tensor:
+            calls.append(len(i))
+            return _net_rows(e_B[i], l_B[i])
+
+        return cache.lookup(e_B, l_B, compute)
+
+    e, rows = np.array([0, 1, 0, 1]), np.array([3, 3, 5, 6])
+    assert torch.equal(lookup(e, rows), _net_rows(e, rows)) and calls == [4]
+    e2, rows2 = np.array([1, 0, 0]), np.array([6, 3, 7])
+    assert torch.equal(lookup(e2, rows2), _net_rows(e2, rows2)) and calls == [4, 1]  # one new
+    assert (cache.hits, cache.misses) == (2, 5)
+    # rows 3 and 11 share a slot (11 % 8 == 3), in one batch and across batches: never mixed up
+    e3, rows3 = np.array([0, 0, 0]), np.array([11, 3, 11])
+    assert torch.equal(lookup(e3, rows3), _net_rows(e3, rows3))
+    assert torch.equal(lookup(e3[:1], rows3[:1]), _net_rows(e3[:1], rows3[:1]))
+    assert torch.equal(lookup(e3[1:2], rows3[1:2]), _net_rows(e3[1:2], rows3[1:2]))
+    cache.clear()
+    before = len(calls)
+    assert torch.equal(lookup(e, rows), _net_rows(e, rows)) and calls[before:] == [4]
+
+
+def test_state_round_trip_keeps_the_stored_rows() -> None:
+    cache = TargetCache(num_envs=1, rows_per_env=16, width=3, device=torch.device("cpu"))
+    e, rows = np.zeros(5, dtype=np.int64), np.array([1, 2, 3, 9, 15])
+    cache.lookup(e, rows, lambda i: _net_rows(e[i], rows[i]))
+    other = TargetCache(num_envs=1, rows_per_env=16, width=3, device=torch.device("cpu"))
+    other.load_state_dict(cache.state_dict())
+
+    def never(i: np.ndarray) -> torch.Tensor:
+        raise AssertionError("a stored row was computed again")
+
+    assert torch.equal(other.lookup(e, rows, never), _net_rows(e, rows))
+    with pytest.raises(ValueError, match="must be >= 1"):
+        TargetCache(num_envs=1, rows_per_env=0, width=3, device=torch.device("cpu"))
+
+
+def test_an_agent_with_the_cache_trains_as_one_without(tmp_path: Path) -> None:
+    kw = dict(sample_recent=True, target_update_every=40, k=3, k_target="max", batch_size=16)
+    agents = {
+        mode: make_agent(tmp_path / mode, target_cache=mode, **kw)  # type: ignore[arg-type]
+        for mode in ("auto", "off")
+    }
+    assert agents["auto"].target_cache is not None and agents["off"].target_cache is None
+    losses: dict[str, list[float]] = {"auto": [], "off": []}
+    for mode, agent in agents.items():
+        feed(agent, 100, seed=4)
+        for step in range(100, 400):  # 300 updates, 7 target copies
+            feed(agent, 1, seed=step)
+            loss = agent.update()
+            assert loss is not None
+            losses[mode].append(float(loss))
+            agent.learn(step)  # target copies (and posterior refreshes) where they fall
+    cache = agents["auto"].target_cache
+    assert cache is not None and cache.hits > cache.misses > 0  # rows were reused
+    np.testing.assert_allclose(losses["auto"], losses["off"], rtol=1e-4, atol=1e-6)
+    for a, b in zip(
+        agents["auto"].torso.parameters(), agents["off"].torso.parameters(), strict=True
+    ):
+        torch.testing.assert_close(a, b, rtol=1e-4, atol=1e-5)
