@@ -64,3 +64,30 @@ def test_relative_command(
 def test_relative_command_keeps_the_interpreter_name(common: ModuleType) -> None:
     got = common.relative_command(["/abs/repo/benchmarks/x.py"], ROOT, executable="python3.11")
     assert got == "python3.11 -m benchmarks.x"
+
+
+def test_pool_rounds_pairs_each_run_with_its_round(
+    tmp_path: Path, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    import json
+
+    from benchmarks import pool_rounds
+
+    def run(rnd: int, sps: float) -> dict[str, object]:
+        return {"algo": "farsighter", "num_envs": 1, "precision": "fp32", "round": rnd, "sps": sps}
+
+    files = {
+        "a": {
+            "cleanrl": [{"sps": 100.0}, {"sps": 200.0}],
+            "measurements": [run(1, 110), run(2, 180)],
+        },
+        "b": {"cleanrl": [{"sps": 150.0}], "measurements": [run(1, 300)]},
+    }
+    for name, data in files.items():
+        (tmp_path / f"{name}.json").write_text(json.dumps(data))
+    monkeypatch.setattr(pool_rounds, "RESULTS", tmp_path)
+    out = pool_rounds.pool(["a", "b"])
+    row = out["table"]["farsighter_E1_fp32"]
+    assert out["cleanrl_median_sps"] == 150.0
+    assert row["per_round_ratios"] == [1.1, 0.9, 2.0] and row["median_per_round_ratio"] == 1.1
+    assert row["median_sps"] == 180.0 and row["median_over_cleanrl_median"] == 1.2
