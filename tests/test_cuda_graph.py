@@ -30,6 +30,9 @@ CUDA = torch.cuda.is_available()
 
 
 def _agent(tmp_path: Path, algo: str, device: str = "cpu", **kw: Any) -> Any:
+    # eager agents without the target cache, so that eager and graphed updates compare alike
+    # (the cache against none: tests/test_target_cache.py)
+    kw.setdefault("target_cache", "off")
     cfg = tiny(algo, tmp_path, learning_starts=0, device=device, **kw)
     env = gym.make("CartPole-v1")
     return build_agent(

@@ -83,3 +83,23 @@ def test_an_agent_with_the_cache_trains_as_one_without(tmp_path: Path) -> None:
         agents["auto"].torso.parameters(), agents["off"].torso.parameters(), strict=True
     ):
         torch.testing.assert_close(a, b, rtol=1e-4, atol=1e-5)
+
+
+def test_a_state_saved_with_another_setting_or_before_the_cache_loads(tmp_path: Path) -> None:
+    cached = make_agent(tmp_path / "a", sample_recent=True, target_cache="auto")
+    plain = make_agent(tmp_path / "b", sample_recent=True, target_cache="off")
+    for agent in (cached, plain):
+        feed(agent, 200, seed=1)
+        for _ in range(5):
+            agent.update()
+    assert cached.target_cache is not None and cached.target_cache.misses > 0
+    plain.load_state_dict(cached.state_dict())  # the cache's state is left aside
+    assert plain.target_cache is None and plain.update() is not None
+    cached.load_state_dict(plain.state_dict())  # none saved: the cache starts empty
+    assert cached.target_cache is not None and not (cached.target_cache.tags >= 0).any()
+    old = cached.state_dict()
+    del old["draws"], old["target_cache"]  # a checkpoint from before both
+    cached.load_state_dict(old)
+    assert cached.update() is not None
+    feed(cached, 1, seed=2)
+    assert cached.act(np.zeros((1, 4), np.float32), 10).shape == (1,)

@@ -455,9 +455,21 @@ class FarsighterAgent:
         return save_state(self, self.SAVED, include_replay)
 
     def load_state_dict(self, state: dict[str, Any]) -> None:
-        load_state(self, self.SAVED, state)
-        if self.target_cache is not None and state.get("replay") is None:
-            self.target_cache.clear()  # its keys are rows of the replay saved without it
+        # The draws and the target cache are kept when they can be: a checkpoint from before
+        # them, or saved with another target_cache or compile setting, starts them afresh.
+        own = ("draws", "target_cache")
+        load_state(self, [n for n in self.SAVED if n not in own], state)
+        draws = state.get("draws")
+        if draws is None:
+            self.draws = ThompsonDraws(self.head)
+        else:
+            self.draws.load_state_dict(draws)
+        if self.target_cache is not None:
+            cached = state.get("target_cache")
+            if cached is None or state.get("replay") is None:  # its keys are replay rows
+                self.target_cache.clear()
+            else:
+                self.target_cache.load_state_dict(cached)
         set_capturable(self.opt, self.graphs)
         reset_step(self.step)  # the optimizer's state tensors are new ones
 
