@@ -452,7 +452,10 @@ class FarsighterAgent:
     )
 
     def state_dict(self, include_replay: bool = True) -> dict[str, Any]:
-        return save_state(self, self.SAVED, include_replay)
+        state = save_state(self, self.SAVED, include_replay)
+        if not include_replay:
+            state["target_cache"] = None  # keyed by replay rows: of no use without them
+        return state
 
     def load_state_dict(self, state: dict[str, Any]) -> None:
         # The draws and the target cache are kept when they can be: a checkpoint from before
