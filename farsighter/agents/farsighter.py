@@ -130,14 +130,12 @@ class FarsighterAgent:
         self.replay = make_replay(cfg, obs_space, frame_stack, seed=cfg.seed + 1, device=device)
         # target features of sampled next states, kept until the next target copy (eager only:
         # a captured or compiled step runs the target network inside it)
+        cached = (
+            cfg.target_cache == "auto" and cfg.sample_recent and not (self.graphs or cfg.compile)
+        )
         self.target_cache = (
-            TargetCache(
-                cfg.num_envs,
-                target_cache_rows(cfg),
-                self.torso.out_dim,
-                device,
-            )
-            if cfg.target_cache == "auto" and cfg.sample_recent and not (self.graphs or cfg.compile)
+            TargetCache(cfg.num_envs, target_cache_rows(cfg), self.torso.out_dim, device)
+            if cached
             else None
         )
         self.rng = np.random.default_rng(cfg.seed + 2)
@@ -462,17 +460,9 @@ class FarsighterAgent:
         # them, or saved with another target_cache or compile setting, starts them afresh.
         own = ("draws", "target_cache")
         load_state(self, [n for n in self.SAVED if n not in own], state)
-        draws = state.get("draws")
-        if draws is None:
-            self.draws = ThompsonDraws(self.head)
-        else:
-            self.draws.load_state_dict(draws)
-        if self.target_cache is not None:
-            cached = state.get("target_cache")
-            if cached is None or state.get("replay") is None:  # its keys are replay rows
-                self.target_cache.clear()
-            else:
-                self.target_cache.load_state_dict(cached)
+        self.draws.load_state_dict(state.get("draws"))
+        if self.target_cache is not None:  # saved without the replay: None (see state_dict)
+            self.target_cache.load_state_dict(state.get("target_cache"))
         set_capturable(self.opt, self.graphs)
         reset_step(self.step)  # the optimizer's state tensors are new ones
 

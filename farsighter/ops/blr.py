@@ -637,7 +637,11 @@ class ThompsonDraws:
         rest = None if self.w_NAD is None else self.w_NAD[self.next :].clone()
         return {"w_NAD": rest, "version": self.version}
 
-    def load_state_dict(self, state: dict[str, Any]) -> None:
+    def load_state_dict(self, state: dict[str, Any] | None) -> None:
+        """Restore :meth:`state_dict`; ``None`` (nothing saved) starts with no draws made."""
+        if state is None:
+            self.w_NAD, self.next, self.version = None, 0, -1
+            return
         rest = state["w_NAD"]
         self.w_NAD = None if rest is None else rest.to(self.head.device, copy=True)
         self.next, self.version = 0, int(state["version"])

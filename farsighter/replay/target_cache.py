@@ -62,9 +62,7 @@ class TargetCache:
         if miss.size:
             fresh = compute(miss)
             miss_t = torch.from_numpy(miss).to(self.values.device)
-            out.index_copy_(
-                0, miss_t, fresh
-            )  # from ``fresh``: two keys of a batch may share a slot
+            out.index_copy_(0, miss_t, fresh)  # from fresh: two keys of a batch may share a slot
             # store one row per slot (the last of the batch's keys there), value and tag alike
             _, first_of_reversed = np.unique(slot_B[miss][::-1], return_index=True)
             keep = miss.size - 1 - first_of_reversed
@@ -84,8 +82,11 @@ class TargetCache:
             "values": self.values.index_select(0, rows).cpu(),
         }
 
-    def load_state_dict(self, state: dict[str, Any]) -> None:
+    def load_state_dict(self, state: dict[str, Any] | None) -> None:
+        """Restore :meth:`state_dict`; ``None`` (nothing saved) leaves the cache empty."""
         self.clear()
+        if state is None:
+            return
         slots = np.asarray(state["slots"], dtype=np.int64)
         if slots.size:
             rows = torch.from_numpy(slots).to(self.values.device)
