@@ -18,6 +18,7 @@ import numpy as np
 from farsighter import algorithms
 from farsighter.config import Config, is_atari_id
 from farsighter.envs.chain import register_chain
+from farsighter.envs.deep_sea import register_deep_sea
 from farsighter.envs.minatar import MinAtarChannelsFirst, is_minatar_id, register_minatar
 from farsighter.errors import EnvError
 
@@ -45,9 +46,10 @@ MINIGRID_EXTRA = "install the exploration extra: pip install 'farsighter[explore
 
 def _register_builtin(env_id: str) -> None:
     # Importing registers ``farsighter/BridgeMaze-v0`` and friends (idempotent); a chain id
-    # ``farsighter/Chain<L>-v0`` is registered when first named.
+    # ``farsighter/Chain<L>-v0`` or a deep sea id is registered when first named.
     importlib.import_module("farsighter.envs.maze")
     register_chain(env_id)
+    register_deep_sea(env_id)
 
 
 def is_minigrid_id(env_id: str) -> bool:
