@@ -12,6 +12,8 @@ import numpy as np
 import pytest
 import torch
 
+from farsighter.agents import farsighter as farsighter_module
+from farsighter.agents.common import td_loss
 from farsighter.agents.farsighter import FarsighterAgent
 from farsighter.config import PRESETS, make_config, validate
 from farsighter.envs import make_env
@@ -172,7 +174,9 @@ def test_sample_target_adds_the_posterior_spread(tmp_path: Path) -> None:
     assert y_sample.mean() > y_mean[0]  # the max over noisy values is optimistic
 
 
-def test_k_target_max_is_the_larger_of_the_k_and_one_step_targets(tmp_path: Path) -> None:
+def test_k_target_max_is_the_larger_of_the_k_and_one_step_targets(
+    tmp_path: Path, monkeypatch: pytest.MonkeyPatch
+) -> None:
     agent = make_agent(tmp_path, k=4, k_target="max")
     feed_rng = np.random.default_rng(3)
     for t in range(300):
@@ -188,21 +192,28 @@ def test_k_target_max_is_the_larger_of_the_k_and_one_step_targets(tmp_path: Path
                 [obs[0]] if end else None,
             )
         )
-    captured = {}
+    captured: dict[str, list[torch.Tensor]] = {"ys": [], "trained": []}
     original = agent._targets
 
     def spy(t, *draws):  # record every target computed during one update
         y = original(t, *draws)
-        captured.setdefault("ys", []).append(y)
+        captured["ys"].append(y)
         return y
 
+    def loss_spy(q, y, kind):  # the target the update actually trains on
+        captured["trained"].append(y.detach().clone())
+        return td_loss(q, y, kind)
+
     agent._targets = spy  # type: ignore[method-assign]
+    monkeypatch.setattr(farsighter_module, "td_loss", loss_spy)
     agent.update()
     y_k, y_1 = captured["ys"]
-    # the second call is the one-step target of the same starts; the update used their max
-    assert y_k.shape == y_1.shape
-    assert (torch.maximum(y_k, y_1) >= y_k).all()
-    assert not torch.equal(y_k, y_1)
+    (trained,) = captured["trained"]
+    # the second call is the one-step target of the same starts; the loss saw their elementwise
+    # max: rows where either is the larger exist, so neither min nor one of the two passes
+    assert y_k.shape == y_1.shape == trained.shape
+    assert (y_1 > y_k).any() and (y_k > y_1).any()
+    assert torch.equal(trained, torch.maximum(y_k, y_1))
 
 
 # ------------------------------------------------------------------ presets
