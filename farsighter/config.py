@@ -49,9 +49,12 @@ class BLRConfig:
     sigma_eps = max(noise_std, RMS residual of the regression targets under the posterior mean)
     and sigma = sigma_eps * prior_std / noise_std, so the posterior follows the scale of the
     values (noise_std is then a floor and prior_std / noise_std the prior's ratio to it)."""
-    redraw: Literal["step", "k", "every", "episode"] = "step"
+    redraw: Literal["step", "k", "every", "episode", "revisit"] = "step"
     """When a fresh Thompson draw z is made, per environment: every step (Algorithm 2), held for k
-    steps (the horizon of the k-step target), every `redraw_every` steps, or once per episode."""
+    steps (the horizon of the k-step target), every `redraw_every` steps, once per episode, or
+    revisit: held while the episode reaches new states, redrawn at its start and whenever it
+    returns to an observation it already saw (commits like a draw per episode, breaks the loops
+    a fixed greedy policy walks; farsighter.ops.revisit). Our extension, not the paper's."""
     redraw_every: int = 1
     """T for ``redraw=every``."""
     target: Literal["mean", "thompson", "sample"] = "mean"

@@ -20,6 +20,7 @@ from farsighter.envs import make_env
 from farsighter.envs.chain import ChainEnv, chain_id
 from farsighter.errors import ConfigError, EnvError
 from farsighter.ops.blr import BLRHead, residual_variance
+from farsighter.ops.revisit import EpisodeVisits
 from farsighter.replay import VectorStep
 from tests.conftest import tiny
 
@@ -133,6 +134,47 @@ def test_each_redraw_mode_draws_exactly_when_it_says(
     draws = _act_and_end(agent, 20, episode_ends={3, 11})
     drawn_at = [t for t in range(20) if draws[t] > (draws[t - 1] if t else 0)]
     assert drawn_at == expected_draw_steps
+
+
+def test_revisit_holds_the_draw_until_the_episode_returns_to_a_state(tmp_path: Path) -> None:
+    """Positions 0 1 2 0 3 4 | 4 1 4 (the episode ends after the sixth step): a draw at the start,
+    at the return to 0, at the new episode, and at the return to 4 in it; 1 is new in the second
+    episode (its visits were forgotten at the end of the first)."""
+    agent = make_agent(tmp_path, k=5, blr__redraw="revisit")
+    positions, end_after = [0, 1, 2, 0, 3, 4, 4, 1, 4], 5
+    draws = []
+    for t, p in enumerate(positions):
+        obs = np.eye(4, dtype=np.float32)[None, p % 4] * (1 + p // 4)
+        action = agent.act(obs, 10)
+        end = t == end_after
+        agent.observe(
+            VectorStep(
+                obs,
+                action,
+                np.zeros(1),
+                np.array([end]),
+                np.array([False]),
+                [obs[0]] if end else None,
+            )
+        )
+        draws.append(agent.counters.draws)
+    drawn_at = [t for t in range(len(draws)) if draws[t] > (draws[t - 1] if t else 0)]
+    assert drawn_at == [0, 3, 6, 8]
+
+
+def test_episode_visits_report_returns_forget_ended_episodes_and_round_trip() -> None:
+    visits = EpisodeVisits(2)
+    a, b = np.zeros((2, 3), np.float32), np.ones((2, 3), np.float32)
+    assert visits.visit(a).tolist() == [False, False]
+    assert visits.visit(np.stack([a[0], b[1]])).tolist() == [True, False]
+    saved = visits.state_dict()
+    visits.end(np.array([True, False]))
+    assert visits.visit(a).tolist() == [False, True]  # env 0 forgot its episode; env 1 did not
+    restored = EpisodeVisits(2)
+    restored.load_state_dict(saved)
+    assert restored.visit(b).tolist() == [False, True]
+    restored.load_state_dict(None)  # a checkpoint from before the rule: afresh
+    assert restored.visit(b).tolist() == [False, False]
 
 
 def test_incremental_posterior_refreshes_every_M_steps(tmp_path: Path) -> None:

@@ -4,7 +4,8 @@ Q(s, a) = phi_theta(s)^T w_a with a Bayesian linear regression posterior over ea
 
 * Acting (Algorithm 2): a Thompson draw w_a = mean_a + chol(Cov_a) z (Eq. 7), one independent z
   per action and per environment; Farsighter draws afresh at every step, BDQN every T steps;
-  ``blr.redraw`` also holds a draw for k steps or for a whole episode. Before
+  ``blr.redraw`` also holds a draw for k steps, for a whole episode, or until the episode
+  revisits a state (farsighter.ops.revisit). Before
   ``learning_starts`` actions are uniform, as for the epsilon agents.
 * Learning theta (Eq. 8): the double-Q loss with w fixed at the posterior mean, on k-step
   returns with gamma^k bootstraps (section 4.4), from the latest N transitions (Algorithm 1
@@ -65,6 +66,7 @@ from farsighter.agents.protocol import AgentFactory
 from farsighter.config import Config
 from farsighter.networks import make_torso, online_and_target
 from farsighter.ops.blr import BLRHead, ThompsonDraws, greedy_predictive_variance
+from farsighter.ops.revisit import EpisodeVisits
 from farsighter.ops.targets import double_q_target
 from farsighter.replay import Batch, VectorStep
 from farsighter.replay.target_cache import TargetCache, target_cache_rows
@@ -148,6 +150,8 @@ class FarsighterAgent:
         # Per-environment weight draws for redraw = k / every / episode.
         self.w_EAD: torch.Tensor | None = None
         self.redraw_E = np.ones(cfg.num_envs, dtype=bool)
+        # redraw = revisit: the states each environment's episode has visited.
+        self.visits = EpisodeVisits(cfg.num_envs)
 
     # ------------------------------------------------------------------ acting
     def act(self, obs_E: np.ndarray, global_step: int, explore: bool = True) -> np.ndarray:
@@ -159,6 +163,8 @@ class FarsighterAgent:
             if not explore:  # evaluation: greedy under the posterior mean
                 q_EA = phi_ED @ self.head.mean_AD.T
             else:
+                if self.cfg.blr.redraw == "revisit":  # back at a state of this episode: redraw
+                    self.redraw_E |= self.visits.visit(obs_E)
                 q_EA = self._thompson_q(phi_ED)
         return q_EA.argmax(dim=1).cpu().numpy()
 
@@ -209,8 +215,10 @@ class FarsighterAgent:
 
     def observe(self, step: VectorStep) -> None:
         self.replay.add_step(step)
-        if self.cfg.blr.redraw == "episode":
-            self.redraw_E |= np.logical_or(step.terminated_E, step.truncated_E)
+        if self.cfg.blr.redraw in ("episode", "revisit"):
+            done_E = np.logical_or(step.terminated_E, step.truncated_E)
+            self.redraw_E |= done_E
+            self.visits.end(done_E)
 
     # ------------------------------------------------------------------ learning
     def learn(self, global_step: int) -> dict[str, torch.Tensor]:
@@ -445,6 +453,7 @@ class FarsighterAgent:
         "draws",
         "target_cache",
         "redraw_E",
+        "visits",
         "recent_phi",
         "counters",
     )
@@ -458,9 +467,10 @@ class FarsighterAgent:
     def load_state_dict(self, state: dict[str, Any]) -> None:
         # The draws and the target cache are kept when they can be: a checkpoint from before
         # them, or saved with another target_cache or compile setting, starts them afresh.
-        own = ("draws", "target_cache")
+        own = ("draws", "target_cache", "visits")
         load_state(self, [n for n in self.SAVED if n not in own], state)
         self.draws.load_state_dict(state.get("draws"))
+        self.visits.load_state_dict(state.get("visits"))
         if self.target_cache is not None:  # saved without the replay: None (see state_dict)
             self.target_cache.load_state_dict(state.get("target_cache"))
         set_capturable(self.opt, self.graphs)
