@@ -1,6 +1,7 @@
 """The exploration suite (``farsighter explore``): its task table, the runner's task axis, the
-per-run measures on synthetic files, censored medians, the growth fits, the claims, bad flags,
-and a tiny real study end to end with --plot-only."""
+per-run measures on synthetic files, bsuite's deep sea criterion and the bad-episode callback,
+censored medians, the growth fits and their bootstrap interval, the claims, bad flags, and tiny
+real studies end to end (the chain with --plot-only, deep sea with bsuite's columns)."""
 
 from __future__ import annotations
 
@@ -17,17 +18,27 @@ import pytest
 
 from farsighter.cli import main
 from farsighter.config import make_config
-from farsighter.envs import make_env
+from farsighter.envs import make_env, make_vector_env
 from farsighter.envs.chain import chain_id
+from farsighter.envs.deep_sea import deep_sea_id
 from farsighter.studies import explore, maze
 from farsighter.studies.explore import (
     AGENTS,
     FAMILIES,
     QUICK,
     STUDY,
+    BadEpisodeLog,
     StudyConfig,
+    beats_dithering,
+    bootstrap_exponent,
+    bsuite_solution,
+    budget_steps,
     censored_median,
+    deep_sea_optimal_return,
+    ended_bad_flags,
+    episodes_budget,
     fit_growth,
+    growth,
     measure,
     run_config,
     tasks,
@@ -60,6 +71,14 @@ def test_family_table() -> None:
     )
     for name in ("doorkey", "keycorridor", "multiroom"):
         assert (FAMILIES[name].threshold, FAMILIES[name].eval_episodes) == (0.5, 10)
+    acrobot = FAMILIES["acrobot"]
+    assert (acrobot.env_ids, acrobot.budgets, acrobot.threshold, acrobot.goal) == (
+        ("Acrobot-v1",),
+        (100_000,),
+        gym.spec("Acrobot-v1").reward_threshold,
+        -500.0,
+    )
+    assert (acrobot.eval_every, acrobot.eval_episodes, acrobot.bsuite) == (5_000, 5, None)
     for family in FAMILIES.values():
         assert len(family.sizes) == len(family.env_ids) == len(family.budgets)
         env = make_env(make_config("ddqn", family.env_ids[0]), seed=0)  # the small size is real
@@ -73,13 +92,61 @@ def test_tasks_with_the_steps_cap_and_sizes() -> None:
     capped = dataclasses.replace(QUICK, steps=15_000)
     assert [n for _, n in tasks(capped)] == [10_000, 10_000, 15_000]
     full = tasks(StudyConfig())
-    assert len(full) == 5 + 3 + 3 + 3 + 1 and full[-1] == ("MountainCar-v0", 200_000)
+    assert len(full) == 5 + 3 + 3 + 3 + 1 + 1 + 9 + 4
+    assert ("MountainCar-v0", 200_000) in full and ("Acrobot-v1", 100_000) in full
+    assert full[-1] == (deep_sea_id(20, stochastic=True), 20 * 3_000)
     two = StudyConfig(families=("doorkey", "chain"), sizes=(5, 6))
     assert tasks(two) == (
         ("MiniGrid-DoorKey-5x5-v0", 100_000),
         ("MiniGrid-DoorKey-6x6-v0", 250_000),
         (chain_id(5), 10_000),
     )
+
+
+def test_deep_sea_families_budgets_and_thresholds(monkeypatch: pytest.MonkeyPatch) -> None:
+    det, sto = FAMILIES["deepsea"], FAMILIES["deepsea-stochastic"]
+    assert det.sizes == (6, 8, 10, 12, 14, 17, 20, 24, 30)
+    assert sto.sizes == (6, 10, 14, 20)
+    assert det.env_ids[0] == "farsighter/DeepSea6-v0"
+    assert sto.env_ids[-1] == "farsighter/DeepSeaStochastic20-v0"
+    # 2^N + 100 episodes of N steps, at most 3,000 episodes
+    assert [episodes_budget(n) for n in (6, 8, 10, 11, 12, 30)] == [
+        164,
+        356,
+        1124,
+        2148,
+        3000,
+        3000,
+    ]
+    assert det.budgets == tuple(n * episodes_budget(n) for n in det.sizes)
+    assert (det.budgets[0], det.budgets[-1], budget_steps(12)) == (984, 90_000, 36_000)
+    assert sto.budgets == tuple(budget_steps(n) for n in sto.sizes)
+    monkeypatch.setattr(explore, "DEEP_SEA_MAX_EPISODES", 10_000)  # the one place to change it
+    assert (episodes_budget(12), budget_steps(12), episodes_budget(14)) == (4196, 50_352, 10_000)
+    monkeypatch.undo()
+    # greedy criteria: deterministic, one episode every max(100, 5 N) steps at 0.5
+    assert [det.eval_every_at(n) for n in (6, 20, 24, 30)] == [100, 100, 120, 150]
+    assert (det.threshold_at(30), det.goal, det.eval_episodes) == (0.5, 0.5, 1)
+    # stochastic: 20 episodes, half of bsuite's optimal return, which the environment holds
+    assert sto.eval_episodes == 20
+    assert sto.threshold_at(6) == pytest.approx(0.5 * ((5 / 6) ** 5 - 0.01))
+    for n in sto.sizes:
+        env: Any = make_env(make_config("ddqn", deep_sea_id(n, stochastic=True)), seed=0).unwrapped
+        assert sto.threshold_at(n) == pytest.approx(0.5 * env.optimal_return)
+        assert deep_sea_optimal_return(n, stochastic=True) == pytest.approx(env.optimal_return)
+    assert deep_sea_optimal_return(8) == pytest.approx(0.99)
+    assert (det.bsuite, sto.bsuite) == (
+        explore.BsuiteCriterion(0.9, 1),
+        explore.BsuiteCriterion(0.8, 100),
+    )
+    with pytest.raises(ValueError, match="one env id, budget"):
+        dataclasses.replace(det, threshold=(0.5, 0.5))
+    # a run's config takes the size's evaluation interval
+    ddqn = AGENTS[0]
+    cfg = run_config(ddqn, StudyConfig(), 1, Path("."), (det.env_ids[-1], 90_000))
+    assert (cfg.eval_every, cfg.eval_episodes, cfg.log_every) == (150, 1, 1_000)
+    cfg = run_config(ddqn, StudyConfig(), 1, Path("."), (sto.env_ids[-1], 60_000))
+    assert (cfg.eval_every, cfg.eval_episodes, cfg.log_every) == (1_000, 20, 1_000)
 
 
 def test_agents_are_one_config_each_on_the_auto_preset(tmp_path: Path) -> None:
@@ -244,6 +311,152 @@ def test_growth_fits_recover_known_exponents() -> None:
     assert few["better"] == "not enough sizes" and np.isnan(few["p"])
 
 
+def test_bootstrap_interval_on_the_exponent() -> None:
+    sizes = [2, 4, 8]
+    # every seed of a size alike: any resample has the same medians, so the interval is p itself
+    lo, hi = bootstrap_exponent(sizes, [[12, 12, 12], [48, 48, 48], [192, 192]])
+    assert lo == pytest.approx(2.0) and hi == pytest.approx(2.0)
+    # the two seeds of size 2 took 1 and 100 episodes: a resample's median there is 1 (a
+    # quarter of them), 50.5 (half) or 100 (a quarter), so the 2.5 and 97.5 percentiles are the
+    # slopes through 100 and through 1 at size 2 (sizes 4 and 8 fixed at 100 and 400)
+    lo, hi = bootstrap_exponent(sizes, [[1, 100], [100, 100], [400, 400]])
+
+    def slope(y0: float) -> float:
+        return float(np.polyfit(np.log(sizes), np.log([y0, 100, 400]), 1)[0])
+
+    assert lo == pytest.approx(slope(100)) and hi == pytest.approx(slope(1))
+    again = bootstrap_exponent(sizes, [[1, 100], [100, 100], [400, 400]])
+    assert again == (lo, hi)  # a fixed seed
+    assert all(np.isnan(bootstrap_exponent([2, 4], [[1, 2], [3, 4]])))
+
+
+def _row(
+    family: str, size: int, agent: str, greedy: float | None, bs: float | None
+) -> dict[str, Any]:
+    """A :func:`explore.per_run` row of a 1,000-episode run (None: unsolved)."""
+    return {
+        "family": family,
+        "size": size,
+        "env": f"{family}{size}",
+        "agent": agent,
+        "seed": 1,
+        "budget": 10_000,
+        "solved": greedy is not None,
+        "episodes_to_solve": float("nan") if greedy is None else greedy,
+        "steps_to_solve": float("nan") if greedy is None else 10 * greedy,
+        "held": greedy is not None,
+        "episodes_to_first_reward": float("nan"),
+        "episodes": 1_000,
+        "bsuite_solved": None if family != "deepsea" else bs is not None,
+        "bsuite_episode": float("nan") if bs is None else bs,
+    }
+
+
+def test_growth_fits_each_measure_with_its_interval() -> None:
+    sizes = (6, 8, 10, 12)
+    rows = [
+        _row("deepsea", n, "Farsighter", 900.0, 2.0 * n**2 + k)  # bsuite: about 2 n^2
+        for n in sizes
+        for k in (0, 1, 2)
+    ]
+    rows += [_row("chain", n, "Farsighter", 3.0 * n**3, None) for n in (5, 10, 20) for _ in "ab"]
+    rows += [_row("deepsea", 14, "Farsighter", None, None)] * 3  # unsolved: not fitted
+    fits = {(f["family"], f["measure"]): f for f in growth(rows)}
+    assert set(fits) == {("deepsea", "greedy"), ("deepsea", "bsuite"), ("chain", "greedy")}
+    bs = fits["deepsea", "bsuite"]
+    assert bs["n_sizes"] == 4 and bs["censored_medians"] == 0
+    assert bs["p"] == pytest.approx(2.0, abs=0.05) and bs["better"] == "polynomial"
+    assert bs["p_lo"] <= bs["p"] <= bs["p_hi"] and bs["p_hi"] - bs["p_lo"] < 0.1
+    assert fits["deepsea", "greedy"]["p"] == pytest.approx(0.0)  # 900 at every size
+    assert fits["chain", "greedy"]["p"] == pytest.approx(3.0)
+    assert fits["chain", "greedy"]["p_lo"] == pytest.approx(3.0)  # the seeds agree
+    # exponential growth; at size 14 two seeds unsolved enter at their run's 1,000 episodes and
+    # make the median a lower bound (the fit flattens: it grows at least this fast)
+    rows = [_row("deepsea", n, "DDQN", None, 10.0 * 2**n) for n in sizes for _ in range(3)]
+    exp = next(f for f in growth(rows) if f["measure"] == "bsuite")
+    assert (exp["n_sizes"], exp["censored_medians"], exp["better"]) == (4, 0, "exponential")
+    assert exp["r"] == pytest.approx(np.log(2))
+    rows += [_row("deepsea", 14, "DDQN", None, None)] * 2 + [_row("deepsea", 14, "DDQN", None, 5.0)]
+    bs = next(f for f in growth(rows) if f["measure"] == "bsuite")
+    assert (bs["n_sizes"], bs["censored_medians"]) == (5, 1) and bs["r"] < exp["r"]
+
+
+# ------------------------------------------------------------------------------------------------
+# bsuite's deep sea criterion and the callback that records the bad flags.
+# ------------------------------------------------------------------------------------------------
+
+
+def test_bsuite_solution_is_the_first_episode_below_the_bad_fraction() -> None:
+    # 9 bad episodes then good ones: 9/10 is not below 0.9, 9/11 is: episode 11
+    assert bsuite_solution([1] * 9 + [0] * 5, threshold=0.9) == 11
+    assert bsuite_solution([1] * 9 + [0], threshold=0.9) is None
+    assert bsuite_solution([0, 1, 1], threshold=0.9) == 1  # a first good episode: 0/1
+    assert bsuite_solution([], threshold=0.9) is None
+    # stochastic: 0.8 and only from episode 100 on; the 5 good episodes first count in the sum
+    bad = [0] * 5 + [1] * 95 + [0] * 30
+    assert bsuite_solution(bad, threshold=0.8, min_episode=100) == 119  # 95/119 < 0.8 <= 95/118
+    assert bsuite_solution(bad, threshold=0.8) == 1
+    assert bsuite_solution(bad, threshold=0.8, min_episode=100, max_episode=118) is None
+    # beating dithering at N: an episode below 2^N + 100
+    assert beats_dithering(163, 6) and not beats_dithering(164, 6)
+    assert not beats_dithering(None, 6)
+
+
+def test_ended_bad_flags_in_both_autoreset_layouts() -> None:
+    same_step = {  # SyncVectorEnv SAME_STEP (the loop's): the ended episode's info in final_info
+        "bad_episode": np.array([False, False, False]),  # the reset's info
+        "final_info": {
+            "bad_episode": np.array([False, True, True]),
+            "_episode": np.array([True, False, True]),
+        },
+    }
+    assert ended_bad_flags(same_step) == [False, True]
+    next_step = {"bad_episode": np.array([True, True]), "_episode": np.array([False, True])}
+    assert ended_bad_flags(next_step) == [True]
+    assert ended_bad_flags({"bad_episode": np.array([True, False])}) == []  # none ended
+    chain_end = {"final_info": {"episode": {}, "_episode": np.array([True])}}
+    assert ended_bad_flags(chain_end) is None and ended_bad_flags({}) is None
+
+
+def test_the_callback_records_every_episode_of_the_real_vector_env(tmp_path: Path) -> None:
+    size, num_envs = 3, 2
+    cfg = make_config("ddqn", deep_sea_id(size), num_envs=num_envs)
+    envs = make_vector_env(cfg, seed=0)
+    mapping = envs.envs[0].unwrapped._env._action_mapping  # type: ignore[attr-defined]
+    log = BadEpisodeLog()
+    obs, _ = envs.reset(seed=0)
+    step = 0
+    for _ in range(3 * size):  # three episodes in each environment
+        cells = [divmod(int(np.argmax(o)), size) for o in obs]
+        right = [int(mapping[r, c]) for r, c in cells]
+        # environment 0 always moves right; environment 1 moves wrong at the first step
+        actions = np.array([right[0], right[1] if cells[1] != (0, 0) else 1 - right[1]])
+        obs, _, _, _, info = envs.step(actions)
+        step += num_envs
+        log.on_step(step, info, agent=None)
+    envs.close()
+    log.on_finish(tmp_path, agent=None)
+    with (tmp_path / "bad_episodes.csv").open() as fh:
+        rows = list(csv.DictReader(fh))
+    assert [(int(r["global_step"]), int(r["episode"]), int(r["bad"])) for r in rows] == [
+        (6, 1, 0),
+        (6, 2, 1),
+        (12, 3, 0),
+        (12, 4, 1),
+        (18, 5, 0),
+        (18, 6, 1),
+    ]
+    # an environment without the flag writes nothing
+    chain = BadEpisodeLog()
+    vec = make_vector_env(make_config("ddqn", chain_id(5)), seed=0)
+    vec.reset(seed=0)
+    for t in range(20):
+        chain.on_step(t + 1, vec.step(np.array([0]))[4], agent=None)
+    vec.close()
+    chain.on_finish(tmp_path / "x", agent=None)  # would fail to write there: no directory
+    assert not chain.rows and not (tmp_path / "x").exists()
+
+
 # ------------------------------------------------------------------------------------------------
 # Outputs and claims on synthetic runs (the runner's run dicts).
 # ------------------------------------------------------------------------------------------------
@@ -346,6 +559,77 @@ def test_a_ddqn_that_fails_where_farsighter_solves_and_the_not_shown_cases(tmp_p
     assert "not shown: Farsighter solves a seed at fewer than 3 sizes" in report
 
 
+def _deep_sea_run(size: int, bad_until: int | None, seed: int) -> dict[str, Any]:
+    """A deep sea run of its family's budget whose episodes are bad up to ``bad_until`` (never
+    good: None) and whose greedy evaluations never reach the threshold."""
+    n = episodes_budget(size)
+    bad = np.ones(n) if bad_until is None else (np.arange(1, n + 1) <= bad_until).astype(float)
+    return {
+        "seed": seed,
+        "steps": budget_steps(size),
+        "task": deep_sea_id(size),
+        "metrics": {
+            "global_step": size * np.arange(1.0, n + 1),
+            "episodic_return": 0.99 * (1 - bad),
+        },
+        "eval": {"global_step": np.array([100.0]), "eval_return_mean": np.array([0.0])},
+        "bad_episodes": {"global_step": size * np.arange(1.0, n + 1), "bad": bad},
+    }
+
+
+def test_deep_sea_claims_fit_bsuites_episode_and_say_it_plainly(tmp_path: Path) -> None:
+    sizes = (6, 8, 10)
+    runs = {
+        "DDQN": [_deep_sea_run(n, 2**n // 2, s) for n in sizes for s in (1, 2, 3)],
+        "Farsighter": [_deep_sea_run(n, 2 * n**2, s) for n in sizes for s in (1, 2, 3)],
+    }
+    runs["DDQN"][-1] = _deep_sea_run(10, None, 3)  # one seed never leaves the bad episodes
+    saved = dataclasses.asdict(
+        StudyConfig(families=("deepsea",), sizes=sizes, agents=tuple(runs), seeds=(1, 2, 3))
+    )
+    (tmp_path / "figures").mkdir()
+    explore.write_outputs(tmp_path, json.loads(json.dumps(saved)), runs)
+    table = {(r["agent"], r["size"]): r for r in csv.DictReader((tmp_path / "table.csv").open())}
+    ddqn10 = table["DDQN", "10"]
+    assert (ddqn10["seeds_solved"], ddqn10["seeds_bsuite"], ddqn10["seeds_bsuite_solved"]) == (
+        "0",
+        "3",
+        "2",
+    )
+    # 512 bad episodes then good ones: 512/569 < 0.9 <= 512/568, so bsuite's episode is 569
+    assert float(ddqn10["median_bsuite_episode"]) == 569 and ddqn10["bsuite_censored"] == "False"
+    report = (tmp_path / "report.md").read_text()
+    assert (
+        "| deepsea | 10 | 11,240 | DDQN | 0/3 | 0/3 | >1124 | >11240 | 513 | 2/3 | 569 |" in report
+    )
+    assert (
+        "- **deepsea**: shown: Farsighter's episodes to solve grow polynomially while DDQN's "
+        in report
+    )
+    assert (
+        "Fitted: bsuite's episode to solve (bad-episode fraction). Farsighter: p = 1.98" in report
+    )
+    assert (
+        "  - Farsighter: growth is polynomial (a polynomial fits better; p = 1.98, 95% bootstrap "
+        "interval [1.98, 1.98])." in report
+    )
+    assert (
+        "  - DDQN: growth is not polynomial (an exponential fits better: r = 0.69 (R² 1)" in report
+    )
+    growth_rows = list(csv.DictReader((tmp_path / "growth.csv").open()))
+    assert [(g["agent"], g["measure"]) for g in growth_rows] == [
+        ("DDQN", "greedy"),
+        ("DDQN", "bsuite"),
+        ("Farsighter", "greedy"),
+        ("Farsighter", "bsuite"),
+    ]
+    far = growth_rows[-1]
+    assert float(far["p_lo"]) == pytest.approx(float(far["p"])) == float(far["p_hi"])  # seeds agree
+    assert "| deepsea | Farsighter | bsuite | 3 | 0 | p = 1.98 (R² 1) | [1.98, 1.98] |" in report
+    assert "bsuite scores it (`bsuite/experiments/deep_sea/analysis.py`)" in report
+    assert (tmp_path / "figures" / "deepsea.png").stat().st_size > 10_000
+
+
 # ------------------------------------------------------------------------------------------------
 # The command: bad flags, and a tiny study end to end.
 # ------------------------------------------------------------------------------------------------
@@ -357,6 +641,10 @@ BAD = [
     ("--families chain --sizes 7", "--sizes 7 is no size of the chosen families (chain: 5 10 20"),
     ("--families chain mountaincar --sizes 5", "--sizes leave family mountaincar without a task"),
     ("--steps -1", "--steps must be >= 0"),
+    (
+        "--families deepsea --sizes 6 --steps 5",
+        "--steps 5 leaves farsighter/DeepSea6-v0 without an episode (each lasts 6 steps)",
+    ),
     ("--seeds 1 1", "--seeds name a seed twice"),
     ("--agents Nope", "unknown explore agent(s) ['Nope']"),
 ]
@@ -399,6 +687,9 @@ def test_tiny_study_end_to_end_and_plot_only(tmp_path: Path) -> None:
     assert [(r["task"], r["seed"], r["steps"]) for r in runs["DDQN"]] == [(chain_id(5), 1, 2000)]
     rows = list(csv.DictReader((out / "runs.csv").open()))
     assert int(rows[0]["episodes"]) == len(runs["DDQN"][0]["metrics"]["global_step"])
+    # the chain reports no bad flags: no bad_episodes.csv, and bsuite's columns say n/a
+    assert not (run_dir / "bad_episodes.csv").exists() and runs["DDQN"][0]["bad_episodes"] is None
+    assert rows[0]["bsuite_solved"] == "" and "| n/a | n/a |" in report
 
     # a finished run is kept when the study runs again
     stamp = (run_dir / "summary.json").stat().st_mtime_ns
@@ -409,3 +700,28 @@ def test_tiny_study_end_to_end_and_plot_only(tmp_path: Path) -> None:
     (out / "table.csv").unlink()
     assert main(["explore", "--plot-only", str(out)]) == 0
     assert figure.exists() and (out / "table.csv").exists()
+
+
+def test_tiny_deep_sea_study_records_bad_flags_and_bsuites_columns(tmp_path: Path) -> None:
+    out = tmp_path / "x"
+    line = "--families deepsea --sizes 6 --seeds 1 --agents DDQN --steps 600 --workers 1"
+    assert main(["explore", *line.split(), "--out", str(out), "--no-progress"]) == 0
+    run_dir = out / "runs" / "farsighter-deepsea6-v0" / "ddqn__s1"
+    with (run_dir / "bad_episodes.csv").open() as fh:
+        bad = list(csv.DictReader(fh))
+    assert [int(r["episode"]) for r in bad] == list(range(1, 101))  # 600 steps, 6 a episode
+    assert [int(r["global_step"]) for r in bad] == [6 * e for e in range(1, 101)]
+    _, runs = load_runs(STUDY, out)
+    returns = runs["DDQN"][0]["metrics"]["episodic_return"]
+    flags = np.array([int(r["bad"]) for r in bad])
+    # deterministic deep sea: an episode is good exactly when it reached the reward (0.99)
+    np.testing.assert_array_equal(flags, (returns < 0.5).astype(int))
+    episode = bsuite_solution(flags, 0.9)
+    solved = beats_dithering(episode, 6)
+    (row,) = csv.DictReader((out / "runs.csv").open())
+    assert row["bsuite_solved"] == str(solved)
+    table = (out / "table.md").read_text()
+    assert "| bsuite solved | median bsuite episode |" in table
+    median = f"{episode}" if solved else ">100"
+    assert "| deepsea | 6 | 600 | DDQN | " in table and f"| {int(solved)}/1 | {median} |" in table
+    assert "| deepsea | DDQN | bsuite |" in table  # the growth table's bsuite row

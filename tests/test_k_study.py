@@ -284,6 +284,9 @@ def test_solved_rules() -> None:
     chain = kstudy.solved_rule("farsighter/Chain10-v0")
     assert chain is not None and chain.threshold == explore.FAMILIES["chain"].threshold
     assert kstudy.solved_rule("Acrobot-v1") is not None  # registered threshold -100
+    deep = kstudy.solved_rule("farsighter/DeepSeaStochastic10-v0")  # a threshold per size
+    sto = explore.FAMILIES["deepsea-stochastic"]
+    assert deep is not None and deep.threshold == sto.threshold_at(10) == sto.threshold[1]
     assert kstudy.solved_rule("Nope-v0") is None
 
 

@@ -1,13 +1,16 @@
 """The exploration suite: how the episodes an agent needs to solve a task grow with its size.
 
 Task families with a size knob (:data:`FAMILIES`: the combination-lock chain, MiniGrid DoorKey,
-KeyCorridor and MultiRoom, and MountainCar), every agent with one config for all of them (the
-library's ``auto`` preset and the agent's own overrides: no per-task tuning), several seeds each
-(:mod:`farsighter.studies.runner` runs the agent x task x seed grid, resumes an interrupted study
-and loads the saved runs). Per run it measures from the saved metrics.csv and eval.csv whether and
-when a greedy evaluation first reached the family's threshold; per family and agent it fits the
-growth of the episodes to solve against the size, polynomial and exponential. Everything is
-drawn from saved files, so ``--plot-only`` redraws it.
+KeyCorridor and MultiRoom, bsuite's deep sea, deterministic and stochastic, MountainCar and
+Acrobot), every agent with one config for all of them (the library's ``auto`` preset and the
+agent's own overrides: no per-task tuning), several seeds each (:mod:`farsighter.studies.runner`
+runs the agent x task x seed grid, resumes an interrupted study and loads the saved runs). Per run
+it measures from the saved metrics.csv and eval.csv whether and when a greedy evaluation first
+reached the family's threshold; on deep sea it also records every episode's bad flag
+(bad_episodes.csv, :class:`BadEpisodeLog`) and applies bsuite's own criterion
+(:func:`bsuite_solution`). Per family and agent it fits the growth of the episodes to solve
+against the size, polynomial and exponential, with a bootstrap interval on the polynomial
+exponent. Everything is drawn from saved files, so ``--plot-only`` redraws it.
 """
 
 from __future__ import annotations
@@ -24,10 +27,28 @@ import numpy as np
 
 from farsighter.config import Config
 from farsighter.envs.chain import SOLVED_RETURN, chain_id
+from farsighter.envs.deep_sea import deep_sea_id
 from farsighter.errors import FarsighterError
 from farsighter.studies import runner
 from farsighter.studies.claims import fmt
 from farsighter.studies.runner import Agent, Runs, StudyArgs, Task, figure
+
+BSUITE_NUM_EPISODES = 10_000
+"""Episodes of a bsuite deep sea run (its sweep's NUM_EPISODES); its analysis looks no further."""
+BSUITE_FORGIVENESS = 100
+"""bsuite's score: a size is solved if its solution episode is below 2^N + this."""
+
+
+@dataclass(frozen=True)
+class BsuiteCriterion:
+    """bsuite's deep sea analysis (``bsuite/experiments/deep_sea/analysis.py`` and
+    ``deep_sea_stochastic/analysis.py``): a run is solved at the first episode where the running
+    fraction of bad episodes (bad episodes so far / episodes so far) is below ``threshold``,
+    among the episodes from ``min_episode`` on; the size counts as solved ("beats dithering")
+    when that episode is below 2^N + :data:`BSUITE_FORGIVENESS`."""
+
+    threshold: float
+    min_episode: int = 1
 
 
 @dataclass(frozen=True)
@@ -41,18 +62,40 @@ class Family:
     """The environment id of each size."""
     budgets: tuple[int, ...]
     """Environment steps of a run at each size."""
-    threshold: float
-    """Solved: a greedy evaluation's mean return is at least this."""
+    threshold: float | tuple[float, ...]
+    """Solved: a greedy evaluation's mean return is at least this: one value for every size, or
+    one per size (:meth:`threshold_at`)."""
     solved: str
     """What reaching the threshold means (the report)."""
     goal: float
     """A training episode whose return is above this reached the reward (first-reward column)."""
-    eval_every: int
+    eval_every: int | tuple[int, ...]
+    """Steps between greedy evaluations: one value for every size, or one per size
+    (:meth:`eval_every_at`)."""
     eval_episodes: int
+    bsuite: BsuiteCriterion | None = None
+    """bsuite's own criterion (deep sea): its runs record bad_episodes.csv."""
+
+    def __post_init__(self) -> None:
+        n = len(self.sizes)
+        per_size = [self.env_ids, self.budgets]
+        per_size += [v for v in (self.threshold, self.eval_every) if isinstance(v, tuple)]
+        if any(len(v) != n for v in per_size):
+            raise ValueError(f"a family needs one env id, budget (and so on) per size ({n})")
 
     def task(self, size: int) -> Task:
         i = self.sizes.index(size)
         return self.env_ids[i], self.budgets[i]
+
+    def threshold_at(self, size: int) -> float:
+        """The threshold of the tasks of this size."""
+        t = self.threshold
+        return t[self.sizes.index(size)] if isinstance(t, tuple) else t
+
+    def eval_every_at(self, size: int) -> int:
+        """Steps between the evaluations of a run at this size."""
+        e = self.eval_every
+        return e[self.sizes.index(size)] if isinstance(e, tuple) else e
 
 
 CHAIN_SIZES = (5, 10, 20, 30, 50)
@@ -69,6 +112,76 @@ def _minigrid(
     """A MiniGrid family: solved at a mean return of 0.5, 10 evaluation episodes every 10k
     steps; a training episode with any reward reached the goal."""
     return Family(size, sizes, ids, budgets, 0.5, _MINIGRID_SOLVED, 0.0, 10_000, 10)
+
+
+DEEP_SEA_MAX_EPISODES = 3_000
+"""The most training episodes of a deep sea run (bsuite runs 10,000): the one place to change
+every deep sea budget (:func:`episodes_budget`)."""
+DEEP_SEA_SIZES = (6, 8, 10, 12, 14, 17, 20, 24, 30)
+DEEP_SEA_STOCHASTIC_SIZES = (6, 10, 14, 20)
+DEEP_SEA_STOCHASTIC_EVAL_EPISODES = 20
+
+
+def episodes_budget(size: int) -> int:
+    """Training episodes of a deep sea run of side N: 2^N + 100 (bsuite's bound: a run that
+    solves later does not beat dithering), at most :data:`DEEP_SEA_MAX_EPISODES`."""
+    return min(2**size + BSUITE_FORGIVENESS, DEEP_SEA_MAX_EPISODES)
+
+
+def budget_steps(size: int) -> int:
+    """Environment steps of a deep sea run of side N: every episode lasts exactly N steps."""
+    return size * episodes_budget(size)
+
+
+def deep_sea_optimal_return(size: int, stochastic: bool = False) -> float:
+    """bsuite's optimal expected return of deep sea of side N (``DeepSea._optimal_return``):
+    the reward 1 less the move cost 0.01, where in the stochastic version the N - 1 right moves
+    before the last all succeed with probability (1 - 1/N)^(N - 1)."""
+    reach = (1 - 1 / size) ** (size - 1) if stochastic else 1.0
+    return reach - 0.01
+
+
+def _deep_sea(stochastic: bool) -> Family:
+    """bsuite's deep sea at :data:`DEEP_SEA_SIZES` (stochastic: :data:`DEEP_SEA_STOCHASTIC_SIZES`)
+    with :func:`budget_steps`; bsuite's criterion beside the greedy one."""
+    sizes = DEEP_SEA_STOCHASTIC_SIZES if stochastic else DEEP_SEA_SIZES
+    ids = tuple(deep_sea_id(n, stochastic) for n in sizes)
+    budgets = tuple(budget_steps(n) for n in sizes)
+    if not stochastic:
+        return Family(
+            "grid side N",
+            sizes,
+            ids,
+            budgets,
+            threshold=0.5,
+            solved="the only return above 0 is 0.99 (the reward 1 less the move cost 0.01): the "
+            "greedy episode went right at every step; one evaluation episode (the task is "
+            "deterministic) every max(100, 5 N) steps",
+            goal=0.5,
+            eval_every=tuple(max(100, 5 * n) for n in sizes),  # one episode of N steps: cheap
+            eval_episodes=1,
+            bsuite=BsuiteCriterion(threshold=0.9),
+        )
+    return Family(
+        "grid side N",
+        sizes,
+        ids,
+        budgets,
+        threshold=tuple(0.5 * deep_sea_optimal_return(n, stochastic=True) for n in sizes),
+        solved="half of bsuite's optimal expected return (1 - 1/N)^(N - 1) - 0.01, so 0.196 at "
+        "N = 6 and 0.184 at N = 20: a right move fails with probability 1/N and the two bottom "
+        f"corners add N(0, 1) noise, so the mean is over {DEEP_SEA_STOCHASTIC_EVAL_EPISODES} "
+        "evaluation episodes (every 50 N steps, 50 training episodes); the noise of that mean "
+        "has a standard deviation of 0.22, so a policy that never reaches the reward but ends in "
+        "the bottom-left corner passes one evaluation with probability about 0.2: read *held* "
+        "and bsuite's column before *solved* here",
+        # as deepsea; the corner noise passes it too (a left-corner episode with probability
+        # 0.31), so the first-reward column says little here
+        goal=0.5,
+        eval_every=tuple(50 * n for n in sizes),
+        eval_episodes=DEEP_SEA_STOCHASTIC_EVAL_EPISODES,
+        bsuite=BsuiteCriterion(threshold=0.8, min_episode=100),
+    )
 
 
 FAMILIES: dict[str, Family] = {
@@ -116,6 +229,22 @@ FAMILIES: dict[str, Family] = {
         eval_every=5_000,
         eval_episodes=5,
     ),
+    "acrobot": Family(
+        size="size (one)",
+        sizes=(1,),
+        env_ids=("Acrobot-v1",),
+        budgets=(100_000,),
+        threshold=-100.0,  # Gymnasium's reward_threshold for Acrobot-v1
+        solved="the reward is -1 a step until the tip swings over the line (0 at that step) and "
+        "an episode ends at 500 steps, so one that never swings over returns -500: a mean of "
+        "-100 or more (Gymnasium's reward_threshold for Acrobot-v1) means the evaluation "
+        "episodes swung the tip over within about 100 steps on average",
+        goal=-500.0,
+        eval_every=5_000,
+        eval_episodes=5,
+    ),
+    "deepsea": _deep_sea(stochastic=False),
+    "deepsea-stochastic": _deep_sea(stochastic=True),
 }
 
 TASKS: dict[str, tuple[str, int]] = {
@@ -170,7 +299,8 @@ class Args(StudyArgs):
     steps: Annotated[int | None, runner.study_flag("N")] = None
     """Cap on every task's step budget (0: each task's own budget)."""
     families: Annotated[tuple[str, ...] | None, runner.study_flag("NAME [NAME ...]")] = None
-    """Task families: chain, doorkey, keycorridor, multiroom, mountaincar."""
+    """Task families: chain, doorkey, keycorridor, multiroom, mountaincar, acrobot, deepsea,
+    deepsea-stochastic."""
     sizes: Annotated[tuple[int, ...] | None, runner.study_flag("N [N ...]")] = None
     """Only these sizes of the chosen families (none given: every size)."""
 
@@ -191,7 +321,8 @@ def run_config(agent: Agent, study: StudyConfig, seed: int, run_dir: Path, task:
     """The library's default for the task (``auto``) and the agent's overrides; the family's
     evaluation settings and no replay in the final checkpoint (measurement, not tuning)."""
     env, steps = task
-    family = FAMILIES[TASKS[env][0]]
+    name, size = TASKS[env]
+    family, every = FAMILIES[name], FAMILIES[name].eval_every_at(size)
     return runner.run_config(
         agent,
         env,
@@ -199,11 +330,11 @@ def run_config(agent: Agent, study: StudyConfig, seed: int, run_dir: Path, task:
         seed,
         steps,
         run_dir,
-        eval_every=family.eval_every,
+        eval_every=every,
         eval_episodes=family.eval_episodes,
         checkpoint_every=0,
         save_replay=False,  # a MiniGrid run's replay is gigabytes; the study never resumes one
-        log_every=max(family.eval_every, 1_000),
+        log_every=max(every, 1_000),
     )
 
 
@@ -232,10 +363,16 @@ def _check(study: StudyConfig) -> None:
     for name in study.families:
         if study.sizes and not set(study.sizes) & set(FAMILIES[name].sizes):
             raise FarsighterError(f"--sizes leave family {name} without a task ({_sizes([name])})")
+    for env, steps in tasks(study):
+        name, size = TASKS[env]
+        if FAMILIES[name].bsuite and steps < size:
+            raise FarsighterError(
+                f"--steps {steps} leaves {env} without an episode (each lasts {size} steps)"
+            )
     from farsighter.config import make_config
     from farsighter.envs import make_env
 
-    for env, _ in tasks(study):  # a missing extra (minigrid) fails here, before any run
+    for env, _ in tasks(study):  # a missing extra (minigrid, bsuite) fails here, before any run
         make_env(make_config("ddqn", env), seed=0).close()
 
 
@@ -270,6 +407,95 @@ def measure(run: dict[str, Any], threshold: float, goal: float) -> dict[str, Any
     }
 
 
+def bsuite_solution(
+    bad: Sequence[bool] | np.ndarray,
+    threshold: float,
+    min_episode: int = 1,
+    max_episode: int = BSUITE_NUM_EPISODES,
+) -> int | None:
+    """bsuite's deep sea ``find_solution`` for one run: the first episode (counted from 1)
+    between ``min_episode`` and ``max_episode`` where the running fraction of bad episodes, all
+    bad episodes up to it (the earlier ones included) over its number, is below ``threshold``;
+    None if there is none. bsuite logs (and so checks) only at logarithmically spaced episodes
+    (1-10, 12, 14, 17, 20, 25, ...); this checks every episode, so it can find an episode a
+    little earlier than bsuite's table would."""
+    b = np.asarray(bad, dtype=float)
+    episode = np.arange(1, len(b) + 1)
+    below = (np.cumsum(b) / episode < threshold) & (episode >= min_episode)
+    hit = np.flatnonzero(below & (episode <= max_episode))
+    return int(episode[hit[0]]) if len(hit) else None
+
+
+def beats_dithering(episode: int | None, size: int) -> bool:
+    """bsuite's deep sea score of one run at side N: solved, at an episode below 2^N + 100."""
+    return episode is not None and episode < 2**size + BSUITE_FORGIVENESS
+
+
+def bsuite_measure(
+    run: dict[str, Any], size: int, criterion: BsuiteCriterion | None
+) -> dict[str, Any]:
+    """bsuite's criterion on one run's bad_episodes.csv: bsuite_solved (beats dithering; None
+    where the family has no bsuite criterion or the run recorded no bad flags) and
+    bsuite_episode (:func:`bsuite_solution`'s episode; NaN where none)."""
+    flags = run.get("bad_episodes")
+    if criterion is None or flags is None:
+        return {"bsuite_solved": None, "bsuite_episode": float("nan")}
+    episode = bsuite_solution(flags.get("bad", []), criterion.threshold, criterion.min_episode)
+    return {
+        "bsuite_solved": beats_dithering(episode, size),
+        "bsuite_episode": float("nan") if episode is None else float(episode),
+    }
+
+
+BAD_EPISODES_FILE = "bad_episodes.csv"
+
+
+def ended_bad_flags(info: dict[str, Any]) -> list[bool] | None:
+    """The bad flags (``info["bad_episode"]``) of the episodes that ended at this vector step,
+    in environment order; None where the environments report no such flag. The loop's vector
+    environment resets an ended episode in the same step (Gymnasium's SAME_STEP autoreset), so
+    the ended episode's info is ``info["final_info"]``; without it (NEXT_STEP) it is ``info``
+    itself. Either way ``_episode`` marks the environments whose episode ended."""
+    src = info["final_info"] if "final_info" in info else info
+    if "bad_episode" not in src and "bad_episode" not in info:
+        return None
+    ended = src.get("_episode")
+    if ended is None or "bad_episode" not in src:
+        return []
+    return [bool(src["bad_episode"][i]) for i in np.flatnonzero(ended)]
+
+
+class BadEpisodeLog:
+    """Read-only callback: the bad flag of every training episode, written to
+    bad_episodes.csv (global_step, episode, bad) at the end of a run whose environment reports
+    ``bad_episode`` (deep sea); other runs write nothing."""
+
+    def __init__(self) -> None:
+        self.rows: list[dict[str, int]] = []
+        self.reported = False
+
+    def on_step(self, global_step: int, info: dict[str, Any], agent: Any) -> None:
+        flags = ended_bad_flags(info)
+        if flags is None:
+            return
+        self.reported = True
+        for bad in flags:
+            row = {"global_step": global_step, "episode": len(self.rows) + 1, "bad": int(bad)}
+            self.rows.append(row)
+
+    def on_finish(self, run_dir: Path, agent: Any) -> None:
+        if not self.reported:
+            return
+        with (run_dir / BAD_EPISODES_FILE).open("w", newline="") as fh:
+            writer = csv.DictWriter(fh, fieldnames=["global_step", "episode", "bad"])
+            writer.writeheader()
+            writer.writerows(self.rows)
+
+
+def _bad_episode_log(study: StudyConfig) -> BadEpisodeLog:
+    return BadEpisodeLog()
+
+
 def censored_median(values: Sequence[float], censored: Sequence[bool]) -> tuple[float, bool]:
     """The median of ``values`` where a censored value is a lower bound (the run ended first),
     and whether the median is itself only a lower bound (raising the censored values would
@@ -280,7 +506,8 @@ def censored_median(values: Sequence[float], censored: Sequence[bool]) -> tuple[
 
 
 def per_run(runs: Runs) -> list[dict[str, Any]]:
-    """One row per finished run: where it ran and its :func:`measure`."""
+    """One row per finished run: where it ran, its :func:`measure` and its
+    :func:`bsuite_measure`."""
     rows = []
     for label, items in runs.items():
         for run in items:
@@ -294,16 +521,76 @@ def per_run(runs: Runs) -> list[dict[str, Any]]:
                     "agent": label,
                     "seed": run["seed"],
                     "budget": run["steps"],
-                    **measure(run, family.threshold, family.goal),
+                    **measure(run, family.threshold_at(size), family.goal),
+                    **bsuite_measure(run, size, family.bsuite),
                 }
             )
     return rows
 
 
-def summarise(rows: list[dict[str, Any]]) -> list[dict[str, Any]]:
-    """Per family x size x agent (families and agents in their order in ``rows``, sizes
-    ascending): seeds solved and held, and the median episodes and steps to solve with unsolved
-    seeds censored at the run's end."""
+@dataclass(frozen=True)
+class SolveMeasure:
+    """One way to count the episodes a run took to solve, and its columns in the table."""
+
+    name: str
+    text: str
+    """What it counts (the report)."""
+    solved: str
+    """Table column: seeds solved."""
+    median: str
+    """Table column: the censored median episode."""
+    censored: str
+    """Table column: whether that median is only a lower bound."""
+
+
+SOLVE_MEASURES = {
+    "greedy": SolveMeasure(
+        "greedy",
+        "training episodes to the first greedy evaluation at the threshold",
+        "seeds_solved",
+        "median_episodes_to_solve",
+        "episodes_censored",
+    ),
+    "bsuite": SolveMeasure(
+        "bsuite",
+        "bsuite's episode to solve (bad-episode fraction)",
+        "seeds_bsuite_solved",
+        "median_bsuite_episode",
+        "bsuite_censored",
+    ),
+}
+
+
+def measures_of(family: str) -> tuple[str, ...]:
+    """The solve measures of a family: greedy, and bsuite's where it has a criterion."""
+    return ("greedy", "bsuite") if FAMILIES[family].bsuite else ("greedy",)
+
+
+def primary_measure(family: str) -> str:
+    """The measure the claims use: bsuite's for deep sea, the greedy one elsewhere."""
+    return measures_of(family)[-1]
+
+
+def seed_values(rs: Sequence[dict[str, Any]], measure: str) -> tuple[list[float], list[bool]]:
+    """Per run of ``rs`` (:func:`per_run` rows), the episode it solved at by ``measure`` or,
+    unsolved, its episodes in all (a lower bound), and whether it is such a bound. bsuite's
+    measure leaves out the runs without bad flags."""
+    if measure == "greedy":
+        solved = [bool(r["solved"]) for r in rs]
+        key = "episodes_to_solve"
+    else:
+        rs = [r for r in rs if r["bsuite_solved"] is not None]
+        solved = [bool(r["bsuite_solved"]) for r in rs]
+        key = "bsuite_episode"
+    values = [
+        float(r[key]) if ok else float(r["episodes"]) for r, ok in zip(rs, solved, strict=True)
+    ]
+    return values, [not ok for ok in solved]
+
+
+def _cells(rows: list[dict[str, Any]]) -> dict[tuple[str, int, str], list[dict[str, Any]]]:
+    """Rows by (family, size, agent): families and agents in their order in ``rows``, sizes
+    ascending."""
     families = list(dict.fromkeys(r["family"] for r in rows))
     agents = list(dict.fromkeys(r["agent"] for r in rows))
     cells: dict[tuple[str, int, str], list[dict[str, Any]]] = {}
@@ -311,10 +598,19 @@ def summarise(rows: list[dict[str, Any]]) -> list[dict[str, Any]]:
         rows, key=lambda r: (families.index(r["family"]), r["size"], agents.index(r["agent"]))
     ):
         cells.setdefault((r["family"], r["size"], r["agent"]), []).append(r)
+    return cells
+
+
+def summarise(rows: list[dict[str, Any]]) -> list[dict[str, Any]]:
+    """Per family x size x agent (families and agents in their order in ``rows``, sizes
+    ascending): seeds solved and held, and the median episodes and steps to solve with unsolved
+    seeds censored at the run's end; on deep sea, the seeds that beat dithering by bsuite's
+    criterion and the median of bsuite's episode to solve, censored likewise (NaN, None
+    elsewhere)."""
     table = []
-    for (family, size, agent), rs in cells.items():
+    for (family, size, agent), rs in _cells(rows).items():
         unsolved = [not r["solved"] for r in rs]
-        episodes = [r["episodes"] if not r["solved"] else r["episodes_to_solve"] for r in rs]
+        episodes, _ = seed_values(rs, "greedy")
         steps = [r["budget"] if not r["solved"] else r["steps_to_solve"] for r in rs]
         no_reward = [not np.isfinite(r["episodes_to_first_reward"]) for r in rs]
         first = [
@@ -324,6 +620,10 @@ def summarise(rows: list[dict[str, Any]]) -> list[dict[str, Any]]:
         med_ep, ep_cens = censored_median(episodes, unsolved)
         med_st, st_cens = censored_median(steps, unsolved)
         med_fr, fr_cens = censored_median(first, no_reward)
+        bs_values, bs_unsolved = seed_values(rs, "bsuite")
+        med_bs, bs_cens = (
+            censored_median(bs_values, bs_unsolved) if bs_values else (float("nan"), None)
+        )
         table.append(
             {
                 "family": family,
@@ -340,6 +640,10 @@ def summarise(rows: list[dict[str, Any]]) -> list[dict[str, Any]]:
                 "steps_censored": st_cens,
                 "median_episodes_to_first_reward": med_fr,
                 "first_reward_censored": fr_cens,
+                "seeds_bsuite": len(bs_values) if bs_values else None,
+                "seeds_bsuite_solved": bs_unsolved.count(False) if bs_values else None,
+                "median_bsuite_episode": med_bs,
+                "bsuite_censored": bs_cens,
             }
         )
     return table
@@ -385,17 +689,75 @@ def fit_growth(sizes: Sequence[float], episodes: Sequence[float]) -> dict[str, A
     }
 
 
-def growth(table: list[dict[str, Any]]) -> list[dict[str, Any]]:
-    """Per family x agent: :func:`fit_growth` of the (censored) median episodes to solve over
-    the sizes where at least one seed solved."""
+BOOTSTRAP_RESAMPLES = 1_000
+BOOTSTRAP_SEED = 0
+
+
+def bootstrap_exponent(
+    sizes: Sequence[float],
+    samples: Sequence[Sequence[float]],
+    resamples: int = BOOTSTRAP_RESAMPLES,
+    seed: int = BOOTSTRAP_SEED,
+) -> tuple[float, float]:
+    """A 95% percentile-bootstrap interval on the polynomial exponent p of :func:`fit_growth`:
+    ``resamples`` times, each size's per-seed values (``samples``, censored ones at their lower
+    bound) are drawn again with replacement within that size, their median taken (so the
+    censored median) and p refitted by least squares; the 2.5 and 97.5 percentiles of the p's.
+    Fewer than :data:`MIN_SIZES` sizes: (NaN, NaN)."""
+    if len(sizes) < MIN_SIZES:
+        return float("nan"), float("nan")
+    rng = np.random.default_rng(seed)
+    log_y = np.empty((resamples, len(sizes)))
+    for j, values in enumerate(samples):
+        v = np.asarray(values, dtype=float)
+        draws = v[rng.integers(len(v), size=(resamples, len(v)))]
+        log_y[:, j] = np.log(np.maximum(np.median(draws, axis=1), 1.0))
+    x = np.log(np.asarray(sizes, dtype=float))
+    x = x - x.mean()
+    p = (log_y - log_y.mean(axis=1, keepdims=True)) @ x / (x @ x)
+    lo, hi = np.percentile(p, [2.5, 97.5])
+    return float(lo), float(hi)
+
+
+def growth(rows: list[dict[str, Any]]) -> list[dict[str, Any]]:
+    """Per family x agent x solve measure (:func:`measures_of`), from the :func:`per_run` rows:
+    :func:`fit_growth` of the censored median episodes to solve over the sizes where at least
+    one seed solved, how many of those medians are lower bounds, and :func:`bootstrap_exponent`'s
+    interval on p (p_lo, p_hi)."""
+    cells = _cells(rows)
     out = []
-    for family, agent in dict.fromkeys((r["family"], r["agent"]) for r in table):
-        rows = [r for r in table if (r["family"], r["agent"]) == (family, agent)]
-        solved = [r for r in rows if r["seeds_solved"] > 0]
-        fit = fit_growth(
-            [r["size"] for r in solved], [r["median_episodes_to_solve"] for r in solved]
-        )
-        out.append({"family": family, "agent": agent, **fit})
+    for family, agent in dict.fromkeys((f, a) for f, _, a in cells):
+        for measure in measures_of(family):
+            sizes, medians, samples, censored = [], [], [], 0
+            for (f, size, a), rs in cells.items():
+                if (f, a) != (family, agent):
+                    continue
+                values, unsolved = seed_values(rs, measure)
+                if all(unsolved):  # no seed solved (or no data)
+                    continue
+                median, lower_bound = censored_median(values, unsolved)
+                sizes.append(size)
+                medians.append(median)
+                samples.append(values)
+                censored += lower_bound
+            fit = fit_growth(sizes, medians)
+            lo, hi = bootstrap_exponent(sizes, samples)
+            out.append(
+                {
+                    "family": family,
+                    "agent": agent,
+                    "measure": measure,
+                    "n_sizes": fit["n_sizes"],
+                    "censored_medians": censored,
+                    "p": fit["p"],
+                    "p_lo": lo,
+                    "p_hi": hi,
+                    "r2_poly": fit["r2_poly"],
+                    "r": fit["r"],
+                    "r2_exp": fit["r2_exp"],
+                    "better": fit["better"],
+                }
+            )
     return out
 
 
@@ -406,10 +768,10 @@ def growth(table: list[dict[str, Any]]) -> list[dict[str, Any]]:
 
 def write_outputs(out: Path, study: dict[str, Any], runs: Runs) -> None:
     """runs.csv (per run), table.csv (per family x size x agent), growth.csv (per family x
-    agent), table.md, one figure per family and report.md."""
+    agent x solve measure), table.md, one figure per family and report.md."""
     rows = per_run(runs)
     table = summarise(rows)
-    fits = growth(table)
+    fits = growth(rows)
     for name, data in (("runs", rows), ("table", table), ("growth", fits)):
         with (out / f"{name}.csv").open("w", newline="") as fh:
             writer = csv.DictWriter(fh, fieldnames=list(data[0]))
@@ -425,6 +787,16 @@ def _median(value: float, censored: bool) -> str:
     return (">" if censored else "") + fmt(float(value))
 
 
+def _bsuite_cells(r: dict[str, Any]) -> list[str]:
+    """The table's bsuite columns of one row ("n/a" off deep sea or without bad flags)."""
+    if r["seeds_bsuite"] is None:
+        return ["n/a", "n/a"]
+    return [
+        f"{r['seeds_bsuite_solved']}/{r['seeds_bsuite']}",
+        _median(r["median_bsuite_episode"], r["bsuite_censored"]),
+    ]
+
+
 def _markdown_table(table: list[dict[str, Any]]) -> str:
     head = [
         "family",
@@ -436,6 +808,8 @@ def _markdown_table(table: list[dict[str, Any]]) -> str:
         "median episodes to solve",
         "median steps to solve",
         "median episodes to first reward",
+        "bsuite solved",
+        "median bsuite episode",
     ]
     cells = [
         [
@@ -448,10 +822,15 @@ def _markdown_table(table: list[dict[str, Any]]) -> str:
             _median(r["median_episodes_to_solve"], r["episodes_censored"]),
             _median(r["median_steps_to_solve"], r["steps_censored"]),
             _median(r["median_episodes_to_first_reward"], r["first_reward_censored"]),
+            *_bsuite_cells(r),
         ]
         for r in table
     ]
     return runner.markdown_table(head, cells)
+
+
+def _fitted(fit: dict[str, Any]) -> bool:
+    return bool(fit["better"] != "not enough sizes")
 
 
 def _fit_text(fit: dict[str, Any], key: str) -> str:
@@ -459,29 +838,54 @@ def _fit_text(fit: dict[str, Any], key: str) -> str:
     return f"{key} = {fmt(fit[key])} (R² {fmt(r2)})"
 
 
+def _interval(fit: dict[str, Any]) -> str:
+    return f"[{fmt(fit['p_lo'])}, {fmt(fit['p_hi'])}]"
+
+
 def _markdown_growth(fits: list[dict[str, Any]]) -> str:
     head = [
         "family",
         "agent",
+        "measure",
         "sizes fitted",
+        "lower-bound medians",
         "polynomial exponent p",
+        "p: 95% bootstrap interval",
         "exponential rate r",
         "fits better",
     ]
     cells = []
     for f in fits:
-        fitted = f["better"] != "not enough sizes"
-        p, r = (_fit_text(f, "p"), _fit_text(f, "r")) if fitted else ("", "")
-        cells.append([f["family"], f["agent"], str(f["n_sizes"]), p, r, f["better"]])
+        p, ci, r = (
+            (_fit_text(f, "p"), _interval(f), _fit_text(f, "r")) if _fitted(f) else ("", "", "")
+        )
+        cells.append(
+            [
+                f["family"],
+                f["agent"],
+                f["measure"],
+                str(f["n_sizes"]),
+                str(f["censored_medians"]),
+                p,
+                ci,
+                r,
+                f["better"],
+            ]
+        )
     return runner.markdown_table(head, cells)
 
 
 def _plot(family: str, table: list[dict[str, Any]], fits: list[dict[str, Any]], file: Path) -> None:
+    """Seeds solved against size (bsuite's dashed), then per solve measure the median episodes
+    to solve with the polynomial fit."""
     from matplotlib.ticker import NullLocator
 
     fam = FAMILIES[family]
+    measures = measures_of(family)
     rows = [r for r in table if r["family"] == family]
-    with figure(file, 1, 2, figsize=(11, 4.2)) as (_, (ax0, ax1)):
+    width = 5.5 * (1 + len(measures))
+    with figure(file, 1, 1 + len(measures), figsize=(width, 4.2)) as (_, axes):
+        ax0, panels = axes[0], axes[1:]
         for agent in dict.fromkeys(r["agent"] for r in rows):
             mine = [r for r in rows if r["agent"] == agent]
             color = COLORS.get(agent)
@@ -489,40 +893,61 @@ def _plot(family: str, table: list[dict[str, Any]], fits: list[dict[str, Any]], 
             ax0.plot(
                 x, [r["seeds_solved"] / r["seeds"] for r in mine], "o-", color=color, label=agent
             )
-            solved = [r for r in mine if r["seeds_solved"] > 0]
-            for r in solved:  # a censored median (a lower bound) is an open marker
-                face = "none" if r["episodes_censored"] else color
-                ax1.plot(r["size"], r["median_episodes_to_solve"], "o", color=color, mfc=face)
-            fit = next(f for f in fits if (f["family"], f["agent"]) == (family, agent))
-            if fit["better"] != "not enough sizes":
-                xs = np.array([r["size"] for r in solved], dtype=float)
-                ys = np.log([max(r["median_episodes_to_solve"], 1.0) for r in solved])
-                c = np.mean(ys - fit["p"] * np.log(xs))
-                grid = np.geomspace(xs.min(), xs.max(), 50)
-                ax1.plot(
-                    grid,
-                    np.exp(c) * grid ** fit["p"],
-                    "--",
-                    color=color,
-                    lw=1,
-                    label=f"{agent}: p = {fit['p']:.2g}",
+            if fam.bsuite and all(r["seeds_bsuite"] for r in mine):
+                frac = [r["seeds_bsuite_solved"] / r["seeds_bsuite"] for r in mine]
+                ax0.plot(x, frac, "s--", color=color, mfc="none", label=f"{agent} (bsuite)")
+            for ax, measure in zip(panels, measures, strict=True):
+                m = SOLVE_MEASURES[measure]
+                fit = next(
+                    f
+                    for f in fits
+                    if (f["family"], f["agent"], f["measure"]) == (family, agent, measure)
                 )
-            elif solved:
-                ax1.plot([], [], "o", color=color, label=agent)
+                _plot_medians(ax, [r for r in mine if r[m.solved]], m, fit, agent, color)
         ax0.set_ylim(-0.05, 1.05)
         runner.finish_axes(ax0, fam.size, "fraction of seeds solved", f"{family}: solved")
-        ax1.set_xscale("log")
-        ax1.set_yscale("log")
         sizes = sorted({r["size"] for r in rows})
-        for ax in (ax0, ax1):  # ticks at the sizes run
+        for ax in axes:  # ticks at the sizes run
+            if ax is not ax0:
+                ax.set_xscale("log")
+                ax.set_yscale("log")
             ax.set_xticks(sizes, [str(s) for s in sizes])
             ax.xaxis.set_minor_locator(NullLocator())
-        ax1.set_xlabel(fam.size)
-        ax1.set_ylabel("median training episodes to solve")
-        ax1.set_title(f"{family}: episodes to solve (open: lower bound),\npolynomial fit dashed")
-        if ax1.get_legend_handles_labels()[0]:  # nothing to list where no seed solved
-            ax1.legend(fontsize=8)
-        ax1.grid(alpha=0.3)
+        for ax, measure in zip(panels, measures, strict=True):
+            ax.set_xlabel(fam.size)
+            ax.set_ylabel(f"median {SOLVE_MEASURES[measure].name} episodes to solve")
+            ax.set_title(
+                f"{family}: {SOLVE_MEASURES[measure].name} episodes to solve (open: lower "
+                "bound),\npolynomial fit dashed",
+                fontsize=10,
+            )
+            if ax.get_legend_handles_labels()[0]:  # nothing to list where no seed solved
+                ax.legend(fontsize=8)
+            ax.grid(alpha=0.3)
+
+
+def _plot_medians(
+    ax: Any,
+    solved: list[dict[str, Any]],
+    m: SolveMeasure,
+    fit: dict[str, Any],
+    agent: str,
+    color: Any,
+) -> None:
+    """One agent's medians of measure ``m`` at the sizes some seed solved (a censored median, a
+    lower bound, is an open marker) and its polynomial fit."""
+    for r in solved:
+        face = "none" if r[m.censored] else color
+        ax.plot(r["size"], r[m.median], "o", color=color, mfc=face)
+    if _fitted(fit):
+        xs = np.array([r["size"] for r in solved], dtype=float)
+        ys = np.log([max(r[m.median], 1.0) for r in solved])
+        c = np.mean(ys - fit["p"] * np.log(xs))
+        grid = np.geomspace(xs.min(), xs.max(), 50)
+        label = f"{agent}: p = {fit['p']:.2g} [{fit['p_lo']:.2g}, {fit['p_hi']:.2g}]"
+        ax.plot(grid, np.exp(c) * grid ** fit["p"], "--", color=color, lw=1, label=label)
+    elif solved:
+        ax.plot([], [], "o", color=color, label=agent)
 
 
 _TEXT_HEAD = (
@@ -535,13 +960,33 @@ _TEXT_HEAD = (
     "reached. An unsolved seed counts as its run's total (episodes, steps): a censored value, so a "
     "median marked `>` is a lower bound."
 )
+_BSUITE_NOTE = (
+    "Deep sea is also scored as bsuite scores it (`bsuite/experiments/deep_sea/analysis.py`), "
+    "from every training episode's bad flag (the agent left the diagonal by a wrong move; "
+    "`bad_episodes.csv` of each run): a run is solved at the first episode where the bad episodes "
+    "so far number less than 0.9 of the episodes so far (stochastic deep sea: 0.8, and only from "
+    "episode 100 on), and *bsuite solved* counts the seeds solved so before episode 2^N + 100, "
+    "the seeds that beat dithering. *Median bsuite episode*: that episode, an unsolved seed "
+    "counting as its run's episodes (a lower bound). The budgets stop at min(2^N + 100, "
+    f"{DEEP_SEA_MAX_EPISODES:,}) episodes, so from N = 12 on a seed must beat dithering within "
+    f"{DEEP_SEA_MAX_EPISODES:,} episodes. bsuite checks only the episodes it logs (1-10, 12, 14, "
+    "17, 20, 25, ...); here every episode counts, so an episode can read a little earlier. At "
+    "small N luck passes the criterion: one episode on the diagonal among the first 9 brings "
+    "the fraction below 0.9, which a random policy does with probability about 9/2^N (0.13 at "
+    "N = 6, 0.009 at N = 10; bsuite's sweep starts at N = 10)."
+)
 _GROWTH_NOTE = (
     "Growth of the median episodes to solve against the size, over the sizes where at least one "
     "seed solved (at least 3 such sizes, else *not enough sizes*): least-squares fits of "
     "log(episodes) on log(size) (polynomial, exponent p) and on size (exponential, rate r), with "
-    "their R²; the one with the higher R² fits better. The medians include censored seeds, so an "
-    "agent that fails at a size enters the fit with a lower bound there, and its true growth is "
-    "at least as steep. With three sizes both fits can have a high R²: read the two together."
+    "their R²; the one with the higher R² fits better. *Measure*: greedy, the training episodes "
+    "to the first greedy evaluation at the threshold; bsuite (deep sea), bsuite's episode to "
+    "solve. The 95% interval on p is a percentile bootstrap: each size's seeds drawn again with "
+    f"replacement, {BOOTSTRAP_RESAMPLES:,} times (seed {BOOTSTRAP_SEED}), the censored medians "
+    "recomputed and p refitted; with few seeds it is coarse. The medians include censored seeds, "
+    "so an agent that fails at a size enters the fit with a lower bound there (counted in "
+    "*lower-bound medians*), and its true growth is at least as steep. With three sizes both fits "
+    "can have a high R²: read the two together."
 )
 
 
@@ -561,32 +1006,31 @@ def command(study: dict[str, Any], out: Path) -> str:
 
 
 def _claims(table: list[dict[str, Any]], fits: list[dict[str, Any]]) -> list[str]:
-    """Per family: does Farsighter's growth look polynomial where DDQN's looks exponential (or
-    DDQN fails where Farsighter solves)? Then the agent that solved the most (family, size)."""
+    """Per family, on its :func:`primary_measure`: does Farsighter's growth look polynomial where
+    DDQN's looks exponential (or DDQN fails where Farsighter solves)? Then, plainly, whether
+    each one's growth is polynomial. Last, the agent that solved the most (family, size)."""
     lines = []
-    fit = {(f["family"], f["agent"]): f for f in fits}
+    fit = {(f["family"], f["agent"], f["measure"]): f for f in fits}
     for family in dict.fromkeys(r["family"] for r in table):
         rows = [r for r in table if r["family"] == family]
+        measure = SOLVE_MEASURES[primary_measure(family)]
         head = f"- **{family}**: "
         if not {"Farsighter", "DDQN"} <= {r["agent"] for r in rows}:
             lines.append(head + "not tested: needs both the Farsighter and the DDQN agent.")
             continue
-        f, d = fit[family, "Farsighter"], fit[family, "DDQN"]
+        f, d = fit[family, "Farsighter", measure.name], fit[family, "DDQN", measure.name]
         by = {(r["agent"], r["size"]): r for r in rows}
         sizes = sorted({r["size"] for r in rows})
         if len(sizes) < MIN_SIZES:
             lines.append(head + f"not tested: {len(sizes)} size(s) in this study (needs 3).")
             continue
-        fails = [
-            s
-            for s in sizes
-            if by["Farsighter", s]["seeds_solved"] and not by["DDQN", s]["seeds_solved"]
-        ]
+        solved = measure.solved
+        fails = [s for s in sizes if by["Farsighter", s][solved] and not by["DDQN", s][solved]]
         fails_text = (
             "DDQN solves no seed at size(s) "
             + ", ".join(
-                f"{s} (Farsighter {by['Farsighter', s]['seeds_solved']}/"
-                f"{by['Farsighter', s]['seeds']})"
+                f"{s} (Farsighter {by['Farsighter', s][solved]}/"
+                f"{by['Farsighter', s]['seeds' if measure.name == 'greedy' else 'seeds_bsuite']})"
                 for s in fails
             )
             if fails
@@ -594,7 +1038,10 @@ def _claims(table: list[dict[str, Any]], fits: list[dict[str, Any]]) -> list[str
         )
         f_poly = f["better"] == "polynomial"
         d_exp = d["better"] == "exponential"
-        evidence = f"Farsighter: {_fit_desc(f)}; DDQN: {_fit_desc(d)}; {fails_text}"
+        evidence = (
+            f"Fitted: {measure.text}. Farsighter: {_fit_desc(f)}; DDQN: {_fit_desc(d)}; "
+            f"{fails_text}"
+        )
         if f_poly and (d_exp or fails):
             ddqn = "DDQN's grow exponentially" if d_exp else "DDQN fails at sizes Farsighter solves"
             lines.append(
@@ -602,7 +1049,7 @@ def _claims(table: list[dict[str, Any]], fits: list[dict[str, Any]]) -> list[str
                 f"{evidence}."
             )
         else:
-            if f["better"] == "not enough sizes":
+            if not _fitted(f):
                 why = f"Farsighter solves a seed at fewer than {MIN_SIZES} sizes"
             elif not f_poly:
                 why = "Farsighter's growth does not fit a polynomial better than an exponential"
@@ -610,14 +1057,46 @@ def _claims(table: list[dict[str, Any]], fits: list[dict[str, Any]]) -> list[str
                 why = "DDQN's growth does not fit an exponential better and DDQN solves a seed "
                 why += "wherever Farsighter does"
             lines.append(head + f"not shown: {why}. {evidence}.")
+        lines += [
+            f"  - {_verdict(agent, fit[family, agent, measure.name])}"
+            for agent in ("Farsighter", "DDQN")
+        ]
     lines.append(_most_solved(table))
     return lines
 
 
+def _verdict(agent: str, fit: dict[str, Any]) -> str:
+    """Plainly: is ``agent``'s growth polynomial by this fit?"""
+    bounds = fit["censored_medians"]
+    caveat = (
+        f"; {bounds} of its {fit['n_sizes']} medians are lower bounds, so it grows at least this "
+        "fast"
+        if bounds
+        else ""
+    )
+    if not _fitted(fit):
+        return (
+            f"{agent}: growth not measured: a seed solved at {fit['n_sizes']} size(s), "
+            f"{MIN_SIZES} needed."
+        )
+    p = f"p = {fmt(fit['p'])}, 95% bootstrap interval {_interval(fit)}"
+    if fit["better"] == "polynomial":
+        return f"{agent}: growth is polynomial (a polynomial fits better; {p}){caveat}."
+    if fit["better"] == "exponential":
+        return (
+            f"{agent}: growth is not polynomial (an exponential fits better: "
+            f"{_fit_text(fit, 'r')} against {_fit_text(fit, 'p')}){caveat}."
+        )
+    return f"{agent}: neither a polynomial nor an exponential fits better ({p}){caveat}."
+
+
 def _fit_desc(fit: dict[str, Any]) -> str:
-    if fit["better"] == "not enough sizes":
+    if not _fitted(fit):
         return f"not enough sizes ({fit['n_sizes']} solved by a seed)"
-    return f"{_fit_text(fit, 'p')}, {_fit_text(fit, 'r')}, {fit['better']} fits better"
+    return (
+        f"{_fit_text(fit, 'p')}, p's 95% interval {_interval(fit)}, {_fit_text(fit, 'r')}, "
+        f"{fit['better']} fits better"
+    )
 
 
 def _most_solved(table: list[dict[str, Any]]) -> str:
@@ -659,8 +1138,8 @@ def _write_report(
             f"`{r['env']}`",
             f"{r['budget']:,}",
             f"{FAMILIES[r['family']].eval_episodes} episode(s) every "
-            f"{FAMILIES[r['family']].eval_every:,} steps",
-            f"mean return >= {fmt(FAMILIES[r['family']].threshold)}",
+            f"{FAMILIES[r['family']].eval_every_at(r['size']):,} steps",
+            f"mean return >= {fmt(FAMILIES[r['family']].threshold_at(r['size']))}",
         ]
         for r in dict((r["env"], r) for r in table).values()
     ]
@@ -668,6 +1147,8 @@ def _write_report(
     lines += runner.markdown_table(head, tasks).splitlines()
     lines += [""]
     lines += [f"- {name}: {FAMILIES[name].solved}." for name in families]
+    if any(FAMILIES[name].bsuite for name in families):
+        lines += ["", _BSUITE_NOTE]
     lines += [
         "",
         "## Table",
@@ -682,7 +1163,10 @@ def _write_report(
         "",
         "Farsighter (the default agent) against DDQN: shown where Farsighter's growth fits a "
         "polynomial better while DDQN's fits an exponential better, or DDQN solves no seed at a "
-        "size where Farsighter solves one.",
+        "size where Farsighter solves one. On deep sea the claim fits bsuite's episode to solve "
+        "and counts the seeds that beat dithering (the growth table gives the greedy fit too); "
+        "elsewhere it fits the greedy episodes to solve. Under each family, plainly, whether "
+        "Farsighter's and DDQN's growth is polynomial.",
         "",
         *_claims(table, fits),
         "",
@@ -698,16 +1182,18 @@ def _write_report(
 STUDY = runner.Study(
     kind="explore",
     description="The exploration suite: task families with a size knob (chain, MiniGrid "
-    "DoorKey, KeyCorridor, MultiRoom, MountainCar), every agent with one config; how the "
-    "episodes to solve grow with the size. --quick (the chain at L = 5, 10, 20) takes a few "
-    "minutes on 2 cores.",
+    "DoorKey, KeyCorridor, MultiRoom, bsuite's deep sea and its stochastic version, "
+    "MountainCar, Acrobot), every agent with one config; how the episodes to solve grow with "
+    "the size (deep sea also by bsuite's bad-episode criterion). --quick (the chain at L = 5, "
+    "10, 20) takes a few minutes on 2 cores.",
     agents=AGENTS,
     full=StudyConfig(),
     quick=QUICK,
     run_config=run_config,
     write_outputs=write_outputs,
-    run_files=("metrics.csv", "eval.csv"),
+    run_files=("metrics.csv", "eval.csv", BAD_EPISODES_FILE),  # the last: deep sea runs only
     args=Args,
+    callback=_bad_episode_log,
     check=_check,
     tasks=tasks,
 )

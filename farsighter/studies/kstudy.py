@@ -193,8 +193,9 @@ def solved_rule(env: str) -> Solved | None:
     if env in (ENV_ID, SMALL_ENV_ID):
         return MAZE_SOLVED
     if env in explore.TASKS:
-        family = explore.FAMILIES[explore.TASKS[env][0]]
-        return Solved(family.threshold, strict=False, text=family.solved)
+        name, size = explore.TASKS[env]
+        family = explore.FAMILIES[name]
+        return Solved(family.threshold_at(size), strict=False, text=family.solved)
     import gymnasium as gym
 
     try:
