@@ -16,7 +16,13 @@ action mapping and the "bad episode" bookkeeping are bsuite's own:
 
 Observations are the grid flattened (float32, N * N, one-hot). ``info["bad_episode"]`` says
 whether the agent has left the diagonal by a wrong move so far this episode (bsuite's "bad
-episode", which bsuite's analysis counts), final at the episode's last step. The action mapping
+episode", which bsuite's analysis counts), final at the episode's last step.
+``info["is_success"]`` (after every step, as the loop's success.csv and eval_success.csv read it)
+says whether the episode has collected the treasure's +1 so far, final at the last step (the only
+step that can pay it: the right action in the last column, which pays even when the stochastic
+version's move fails). It is read from the rise of bsuite's noise-free
+``bsuite_info()["denoised_return"]`` during the episode, so the stochastic version's corner noise
+never makes or unmakes a success, as it can a return. The action mapping
 comes from ``mapping_seed`` (bsuite's sweep uses 42 for every size), so that every copy of the
 environment (training, evaluation, vectorised) holds the same lock; the transition and reward
 noise of the stochastic version is seeded by ``reset(seed=...)``.
@@ -70,10 +76,13 @@ class DeepSeaEnv(gymnasium.Env[NDArray[np.float32], np.int64]):
         self._env = DeepSea(
             self.size, deterministic=self.deterministic, seed=0, mapping_seed=mapping_seed
         )
-        self.observation_space = gymnasium.spaces.Box(0.0, 1.0, (self.size * self.size,), np.float32)
+        self.observation_space = gymnasium.spaces.Box(
+            0.0, 1.0, (self.size * self.size,), np.float32
+        )
         self.action_space = gymnasium.spaces.Discrete(2)
         self.optimal_return = float(self._env._optimal_return)  # noqa: SLF001  (bsuite's value)
         self._bad_before = 0
+        self._treasure_before = 0.0
 
     def _info(self) -> dict[str, Any]:
         bad = self._env.bsuite_info()["total_bad_episodes"]
@@ -87,14 +96,20 @@ class DeepSeaEnv(gymnasium.Env[NDArray[np.float32], np.int64]):
         super().reset(seed=seed)
         if seed is not None:  # bsuite draws its noise from a RandomState of its own
             self._env._rng = np.random.RandomState(seed)  # noqa: SLF001
-        self._bad_before = self._env.bsuite_info()["total_bad_episodes"]
+        totals = self._env.bsuite_info()
+        self._bad_before = totals["total_bad_episodes"]
+        self._treasure_before = float(totals["denoised_return"])
         step = self._env.reset()
         return np.asarray(step.observation, np.float32).ravel(), self._info()
 
     def step(self, action: Any) -> tuple[NDArray[np.float32], float, bool, bool, dict[str, Any]]:
         step = self._env.step(int(action))
         obs = np.asarray(step.observation, np.float32).ravel()
-        return obs, float(step.reward), bool(step.last()), False, self._info()
+        info = self._info()
+        # bsuite's denoised return rises by 1 only when the treasure is taken (no noise, no cost)
+        treasure = float(self._env.bsuite_info()["denoised_return"]) - self._treasure_before
+        info["is_success"] = treasure > 0.5
+        return obs, float(step.reward), bool(step.last()), False, info
 
 
 def register_deep_sea(env_id: str) -> bool:
