@@ -109,20 +109,27 @@ def test_deep_sea_families_budgets_and_thresholds(monkeypatch: pytest.MonkeyPatc
     assert sto.sizes == (6, 10, 14, 20)
     assert det.env_ids[0] == "farsighter/DeepSea6-v0"
     assert sto.env_ids[-1] == "farsighter/DeepSeaStochastic20-v0"
-    # 2^N + 100 episodes of N steps, at most 3,000 episodes
-    assert [episodes_budget(n) for n in (6, 8, 10, 11, 12, 30)] == [
-        164,
-        356,
+    # 2^N + 100 episodes of N steps, at least 1,000 and at most 3,000 episodes
+    assert [episodes_budget(n) for n in (6, 8, 9, 10, 11, 12, 30)] == [
+        1000,
+        1000,
+        1000,  # 2^9 + 100 = 612
         1124,
         2148,
         3000,
         3000,
     ]
     assert det.budgets == tuple(n * episodes_budget(n) for n in det.sizes)
-    assert (det.budgets[0], det.budgets[-1], budget_steps(12)) == (984, 90_000, 36_000)
+    assert (det.budgets[0], det.budgets[1], det.budgets[-1]) == (6_000, 8_000, 90_000)
+    assert budget_steps(12) == 36_000
     assert sto.budgets == tuple(budget_steps(n) for n in sto.sizes)
+    assert sto.budgets == (6_000, 11_240, 42_000, 60_000)
     monkeypatch.setattr(explore, "DEEP_SEA_MAX_EPISODES", 10_000)  # the one place to change it
     assert (episodes_budget(12), budget_steps(12), episodes_budget(14)) == (4196, 50_352, 10_000)
+    monkeypatch.setattr(explore, "DEEP_SEA_MAX_EPISODES", 500)  # the cap wins over the floor
+    assert episodes_budget(6) == 500
+    monkeypatch.setattr(explore, "DEEP_SEA_MIN_EPISODES", 100)
+    assert episodes_budget(6) == 164
     monkeypatch.undo()
     # greedy criteria: deterministic, one episode every max(100, 5 N) steps at 0.5
     assert [det.eval_every_at(n) for n in (6, 20, 24, 30)] == [100, 100, 120, 150]
