@@ -1,7 +1,8 @@
 """The exploration suite (``farsighter explore``): its task table, the runner's task axis, the
-per-run measures on synthetic files, bsuite's deep sea criterion and the bad-episode callback,
-censored medians, the growth fits and their bootstrap interval, the claims, bad flags, and tiny
-real studies end to end (the chain with --plot-only, deep sea with bsuite's columns)."""
+per-run measures on synthetic files (by the return, and by the success for stochastic deep sea),
+bsuite's deep sea criterion and the bad-episode callback, censored medians, the growth fits and
+their bootstrap interval, the claims, bad flags, and tiny real studies end to end (the chain with
+--plot-only, deep sea with bsuite's columns, stochastic deep sea measured by success)."""
 
 from __future__ import annotations
 
@@ -21,6 +22,7 @@ from farsighter.config import make_config
 from farsighter.envs import make_env, make_vector_env
 from farsighter.envs.chain import chain_id
 from farsighter.envs.deep_sea import deep_sea_id
+from farsighter.errors import FarsighterError
 from farsighter.studies import explore, maze
 from farsighter.studies.explore import (
     AGENTS,
@@ -35,6 +37,7 @@ from farsighter.studies.explore import (
     budget_steps,
     censored_median,
     deep_sea_optimal_return,
+    deep_sea_success_probability,
     ended_bad_flags,
     episodes_budget,
     fit_growth,
@@ -134,14 +137,27 @@ def test_deep_sea_families_budgets_and_thresholds(monkeypatch: pytest.MonkeyPatc
     # greedy criteria: deterministic, one episode every max(100, 5 N) steps at 0.5
     assert [det.eval_every_at(n) for n in (6, 20, 24, 30)] == [100, 100, 120, 150]
     assert (det.threshold_at(30), det.goal, det.eval_episodes) == (0.5, 0.5, 1)
-    # stochastic: 20 episodes, half of bsuite's optimal return, which the environment holds
-    assert sto.eval_episodes == 20
-    assert sto.threshold_at(6) == pytest.approx(0.5 * ((5 / 6) ** 5 - 0.01))
+    assert det.measured_by == "return" and det.rule_at(6) == "mean return >= 0.5"
+    # stochastic: 20 episodes, their success rate at half the optimal success probability
+    assert (sto.eval_episodes, sto.measured_by, sto.goal) == (20, "success", 0.5)
+    assert sto.threshold_at(6) == pytest.approx(0.5 * (5 / 6) ** 5)
+    assert [sto.rule_at(n) for n in (6, 10, 20)] == [
+        "success rate >= 0.201",
+        "success rate >= 0.194",
+        "success rate >= 0.189",
+    ]
     for n in sto.sizes:
         env: Any = make_env(make_config("ddqn", deep_sea_id(n, stochastic=True)), seed=0).unwrapped
-        assert sto.threshold_at(n) == pytest.approx(0.5 * env.optimal_return)
+        # bsuite's optimal return is the success probability less the move cost
+        p = deep_sea_success_probability(n, stochastic=True)
+        assert p == pytest.approx(env.optimal_return + 0.01)
+        assert sto.threshold_at(n) == pytest.approx(0.5 * p)
         assert deep_sea_optimal_return(n, stochastic=True) == pytest.approx(env.optimal_return)
     assert deep_sea_optimal_return(8) == pytest.approx(0.99)
+    assert deep_sea_success_probability(8) == 1.0
+    assert all(f.measured_by == "return" for k, f in FAMILIES.items() if k != "deepsea-stochastic")
+    with pytest.raises(ValueError, match="measured_by must be"):
+        dataclasses.replace(det, measured_by="mean")  # type: ignore[arg-type]
     assert (det.bsuite, sto.bsuite) == (
         explore.BsuiteCriterion(0.9, 1),
         explore.BsuiteCriterion(0.8, 100),
@@ -296,6 +312,73 @@ def test_measures_of_an_unsolved_run(tmp_path: Path) -> None:
     assert measure(run, threshold=-199.5, goal=-200.0)["steps_to_solve"] == 50.0
     empty = measure({"metrics": {}, "eval": None}, 0.5, 0.5)
     assert not empty["solved"] and empty["episodes"] == 0
+
+
+def _success_files(
+    tmp_path: Path, returns: list[float], successes: list[int], rates: list[float]
+) -> dict[str, Any]:
+    """:func:`_run_files` with success.csv (per training episode) and eval_success.csv (per
+    evaluation, every 25 steps), the evaluations' mean returns all 0.99."""
+    from farsighter.plots import read_csv
+
+    run = _run_files(tmp_path, returns, [0.99] * len(rates))
+    _write_csv(
+        tmp_path / "success.csv",
+        [
+            {"global_step": 10 * (i + 1), "episode": i + 1, "success": v}
+            for i, v in enumerate(successes)
+        ],
+    )
+    _write_csv(
+        tmp_path / "eval_success.csv",
+        [
+            {"global_step": 25 * (i + 1), "eval_success_rate": v, "eval_episodes": 20}
+            for i, v in enumerate(rates)
+        ],
+    )
+    return {
+        **run,
+        "success": read_csv(tmp_path / "success.csv"),
+        "eval_success": read_csv(tmp_path / "eval_success.csv"),
+    }
+
+
+def test_measures_by_success_ignore_the_noisy_returns(tmp_path: Path) -> None:
+    # stochastic deep sea: noisy returns above the goal and mean returns above the threshold
+    # from the start, but the treasure first taken in episode 6 and at the third evaluation
+    returns = [1.3, -0.4, 0.9, 0.2, -1.0, 0.6, 0.0, 1.1]
+    run = _success_files(tmp_path, returns, [0, 0, 0, 0, 0, 1, 0, 1], [0.0, 0.1, 0.25, 0.15])
+    m = measure(run, threshold=0.2, goal=0.5, measured_by="success")
+    assert m == {
+        "solved": True,
+        "episodes_to_solve": 7.0,  # the evaluation at step 75
+        "steps_to_solve": 75.0,
+        "held": False,
+        "episodes_to_first_reward": 6.0,
+        "episodes": 8,
+    }
+    # the return measure on the same run: solved at once, a reward in the first episode
+    by_return = measure(run, threshold=0.2, goal=0.5)
+    assert (by_return["steps_to_solve"], by_return["episodes_to_first_reward"]) == (25.0, 1.0)
+    # the study measures each family by its own: the stochastic one by success
+    task = {"seed": 1, "steps": 80}
+    rows = explore.per_run(
+        {"DDQN": [{**run, **task, "task": t} for t in (deep_sea_id(6, True), deep_sea_id(6))]}
+    )
+    assert [(r["family"], r["steps_to_solve"], r["episodes_to_first_reward"]) for r in rows] == [
+        ("deepsea-stochastic", 75.0, 6.0),
+        ("deepsea", 25.0, 1.0),
+    ]
+    # no success at all: unsolved whatever the returns
+    run = _success_files(tmp_path, returns, [0] * 8, [0.0] * 4)
+    never = measure(run, threshold=0.2, goal=0.5, measured_by="success")
+    assert not never["solved"] and not never["held"] and never["episodes"] == 8
+    assert np.isnan(never["episodes_to_first_reward"]) and np.isnan(never["steps_to_solve"])
+    # a run recorded without is_success cannot be measured so: said, not scored unsolved
+    old = {**run, "success": None, "eval_success": None, "task": "t", "seed": 3}
+    with pytest.raises(FarsighterError, match=r"\(t, seed 3\) has evaluations but no eval_success"):
+        measure(old, 0.2, 0.5, "success")
+    assert not measure({"metrics": {}, "eval": None}, 0.2, 0.5, "success")["solved"]
 
 
 def test_censored_medians_are_lower_bounds_where_a_failure_reaches_the_middle() -> None:
@@ -721,8 +804,10 @@ def test_tiny_deep_sea_study_records_bad_flags_and_bsuites_columns(tmp_path: Pat
     _, runs = load_runs(STUDY, out)
     returns = runs["DDQN"][0]["metrics"]["episodic_return"]
     flags = np.array([int(r["bad"]) for r in bad])
-    # deterministic deep sea: an episode is good exactly when it reached the reward (0.99)
+    # deterministic deep sea: an episode is good exactly when it reached the reward (0.99),
+    # which is when it took the treasure (success.csv, from the environment's is_success)
     np.testing.assert_array_equal(flags, (returns < 0.5).astype(int))
+    np.testing.assert_array_equal(runs["DDQN"][0]["success"]["success"], 1 - flags)
     episode = bsuite_solution(flags, 0.9)
     solved = beats_dithering(episode, 6)
     (row,) = csv.DictReader((out / "runs.csv").open())
@@ -732,3 +817,31 @@ def test_tiny_deep_sea_study_records_bad_flags_and_bsuites_columns(tmp_path: Pat
     median = f"{episode}" if solved else ">100"
     assert "| deepsea | 6 | 600 | DDQN | " in table and f"| {int(solved)}/1 | {median} |" in table
     assert "| deepsea | DDQN | bsuite |" in table  # the growth table's bsuite row
+
+
+def test_tiny_stochastic_deep_sea_study_is_measured_by_success(tmp_path: Path) -> None:
+    out = tmp_path / "x"
+    line = "--families deepsea-stochastic --sizes 6 --seeds 1 --agents DDQN --steps 600 --workers 1"
+    assert main(["explore", *line.split(), "--out", str(out), "--no-progress"]) == 0
+    _, runs = load_runs(STUDY, out)
+    run = runs["DDQN"][0]
+    # every training episode's success (100 of 6 steps) and every evaluation's rate (20
+    # episodes every 300 steps) were recorded and loaded
+    assert list(run["success"]["episode"]) == list(range(1, 101))
+    assert list(run["eval_success"]["global_step"]) == [300, 600]
+    assert list(run["eval_success"]["eval_episodes"]) == [20, 20]
+    # taking the treasure needs the diagonal all the way: a success is never a bad episode
+    bad = run["bad_episodes"]["bad"]
+    assert not np.any((run["success"]["success"] == 1) & (bad == 1))
+    (row,) = csv.DictReader((out / "runs.csv").open())
+    threshold = FAMILIES["deepsea-stochastic"].threshold_at(6)
+    rates = run["eval_success"]["eval_success_rate"]
+    assert row["solved"] == str(bool(np.any(rates >= threshold)))
+    assert row["held"] == str(bool(rates[-1] >= threshold))
+    took = np.flatnonzero(run["success"]["success"] == 1)
+    first = float(took[0] + 1) if len(took) else float("nan")
+    np.testing.assert_equal(float(row["episodes_to_first_reward"]), first)
+    report = (out / "report.md").read_text()
+    assert "| deepsea-stochastic | 6 | `farsighter/DeepSeaStochastic6-v0` | 600 |" in report
+    assert "| success rate >= 0.201 |" in report
+    assert "the fraction of its 20 episodes that took the treasure" in report

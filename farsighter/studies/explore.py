@@ -6,7 +6,9 @@ Acrobot), every agent with one config for all of them (the library's ``auto`` pr
 agent's own overrides: no per-task tuning), several seeds each (:mod:`farsighter.studies.runner`
 runs the agent x task x seed grid, resumes an interrupted study and loads the saved runs). Per run
 it measures from the saved metrics.csv and eval.csv whether and when a greedy evaluation first
-reached the family's threshold; on deep sea it also records every episode's bad flag
+reached the family's threshold (stochastic deep sea: from success.csv and eval_success.csv, the
+fraction of evaluation episodes that took the treasure, whose noise-free flag the environment
+reports, rather than the noisy return); on deep sea it also records every episode's bad flag
 (bad_episodes.csv, :class:`BadEpisodeLog`) and applies bsuite's own criterion
 (:func:`bsuite_solution`). Per family and agent it fits the growth of the episodes to solve
 against the size, polynomial and exponential, with a bootstrap interval on the polynomial
@@ -21,7 +23,7 @@ import shlex
 from collections.abc import Sequence
 from dataclasses import dataclass
 from pathlib import Path
-from typing import Annotated, Any
+from typing import Annotated, Any, Literal
 
 import numpy as np
 
@@ -29,6 +31,7 @@ from farsighter.config import Config
 from farsighter.envs.chain import SOLVED_RETURN, chain_id
 from farsighter.envs.deep_sea import deep_sea_id
 from farsighter.errors import FarsighterError
+from farsighter.rundir import EVAL_SUCCESS_FILE, SUCCESS_FILE
 from farsighter.studies import runner
 from farsighter.studies.claims import fmt
 from farsighter.studies.runner import Agent, Runs, StudyArgs, Task, figure
@@ -63,20 +66,29 @@ class Family:
     budgets: tuple[int, ...]
     """Environment steps of a run at each size."""
     threshold: float | tuple[float, ...]
-    """Solved: a greedy evaluation's mean return is at least this: one value for every size, or
-    one per size (:meth:`threshold_at`)."""
+    """Solved: a greedy evaluation's :attr:`measured_by` (its mean return, or its success rate)
+    is at least this: one value for every size, or one per size (:meth:`threshold_at`)."""
     solved: str
     """What reaching the threshold means (the report)."""
     goal: float
-    """A training episode whose return is above this reached the reward (first-reward column)."""
+    """A training episode whose :attr:`measured_by` (its return, or its 0/1 success) is above
+    this reached the reward (first-reward column)."""
     eval_every: int | tuple[int, ...]
     """Steps between greedy evaluations: one value for every size, or one per size
     (:meth:`eval_every_at`)."""
     eval_episodes: int
     bsuite: BsuiteCriterion | None = None
     """bsuite's own criterion (deep sea): its runs record bad_episodes.csv."""
+    measured_by: Literal["return", "success"] = "return"
+    """What :attr:`threshold` and :attr:`goal` apply to. "return": a greedy evaluation's mean
+    return (eval.csv) and a training episode's return (metrics.csv). "success": the fraction of
+    a greedy evaluation's episodes that ended with ``info["is_success"]`` (eval_success.csv) and a
+    training episode's success flag (success.csv), where the return is too noisy to tell
+    (stochastic deep sea)."""
 
     def __post_init__(self) -> None:
+        if self.measured_by not in ("return", "success"):
+            raise ValueError(f"measured_by must be 'return' or 'success', not {self.measured_by!r}")
         n = len(self.sizes)
         per_size = [self.env_ids, self.budgets]
         per_size += [v for v in (self.threshold, self.eval_every) if isinstance(v, tuple)]
@@ -96,6 +108,11 @@ class Family:
         """Steps between the evaluations of a run at this size."""
         e = self.eval_every
         return e[self.sizes.index(size)] if isinstance(e, tuple) else e
+
+    def rule_at(self, size: int) -> str:
+        """The greedy criterion at this size, in words (the report's task table)."""
+        what = "success rate" if self.measured_by == "success" else "mean return"
+        return f"{what} >= {fmt(self.threshold_at(size))}"
 
 
 CHAIN_SIZES = (5, 10, 20, 30, 50)
@@ -140,12 +157,17 @@ def budget_steps(size: int) -> int:
     return size * episodes_budget(size)
 
 
+def deep_sea_success_probability(size: int, stochastic: bool = False) -> float:
+    """The probability that the optimal policy takes the treasure in deep sea of side N: 1, and
+    in the stochastic version (1 - 1/N)^(N - 1), as the N - 1 right moves before the last must
+    each succeed (probability 1 - 1/N) and the last row's right action pays regardless."""
+    return (1 - 1 / size) ** (size - 1) if stochastic else 1.0
+
+
 def deep_sea_optimal_return(size: int, stochastic: bool = False) -> float:
     """bsuite's optimal expected return of deep sea of side N (``DeepSea._optimal_return``):
-    the reward 1 less the move cost 0.01, where in the stochastic version the N - 1 right moves
-    before the last all succeed with probability (1 - 1/N)^(N - 1)."""
-    reach = (1 - 1 / size) ** (size - 1) if stochastic else 1.0
-    return reach - 0.01
+    the reward 1 times :func:`deep_sea_success_probability`, less the move cost 0.01."""
+    return deep_sea_success_probability(size, stochastic) - 0.01
 
 
 def _deep_sea(stochastic: bool) -> Family:
@@ -174,20 +196,25 @@ def _deep_sea(stochastic: bool) -> Family:
         sizes,
         ids,
         budgets,
-        threshold=tuple(0.5 * deep_sea_optimal_return(n, stochastic=True) for n in sizes),
-        solved="half of bsuite's optimal expected return (1 - 1/N)^(N - 1) - 0.01, so 0.196 at "
-        "N = 6 and 0.184 at N = 20: a right move fails with probability 1/N and the two bottom "
-        f"corners add N(0, 1) noise, so the mean is over {DEEP_SEA_STOCHASTIC_EVAL_EPISODES} "
-        "evaluation episodes (every 50 N steps, 50 training episodes); the noise of that mean "
-        "has a standard deviation of 0.22, so a policy that never reaches the reward but ends in "
-        "the bottom-left corner passes one evaluation with probability about 0.2: read *held* "
-        "and bsuite's column before *solved* here",
-        # as deepsea; the corner noise passes it too (a left-corner episode with probability
-        # 0.31), so the first-reward column says little here
-        goal=0.5,
+        threshold=tuple(0.5 * deep_sea_success_probability(n, stochastic=True) for n in sizes),
+        solved="the success rate of a greedy evaluation (the fraction of its "
+        f"{DEEP_SEA_STOCHASTIC_EVAL_EPISODES} episodes that took the treasure's +1, every 50 N "
+        "steps, so 50 training episodes) is at least half of the optimal policy's success "
+        "probability (1 - 1/N)^(N - 1) (the N - 1 right moves before the last each succeed with "
+        "probability 1 - 1/N; the last row's right action pays regardless): 0.201 at N = 6 (5 "
+        "of 20 episodes), 0.194 at N = 10 and 0.189 at N = 20 (4 of 20), which the optimal "
+        "policy meets in about 95% (N = 6) and 97-98% (N >= 10) of evaluations. Whether an "
+        "episode took the treasure is noise-free (the environment's is_success, from bsuite's "
+        "denoised return), so a policy that never reaches it never passes, whereas the mean "
+        "return, with the N(0, 1) noise of the two bottom corners (a standard deviation of 0.22 "
+        "for a mean of 20), passes half of the optimal return in about 1 evaluation of 5 from "
+        "the bottom-left corner alone. *First reward*: the first training "
+        "episode that took the treasure (success.csv)",
+        goal=0.5,  # a training episode's success is 0 or 1
         eval_every=tuple(50 * n for n in sizes),
         eval_episodes=DEEP_SEA_STOCHASTIC_EVAL_EPISODES,
         bsuite=BsuiteCriterion(threshold=0.8, min_episode=100),
+        measured_by="success",
     )
 
 
@@ -388,28 +415,51 @@ def _check(study: StudyConfig) -> None:
 # ------------------------------------------------------------------------------------------------
 
 
-def measure(run: dict[str, Any], threshold: float, goal: float) -> dict[str, Any]:
-    """One run's measures from its metrics.csv and eval.csv (NaN where a run never got there).
+def measure(
+    run: dict[str, Any],
+    threshold: float,
+    goal: float,
+    measured_by: Literal["return", "success"] = "return",
+) -> dict[str, Any]:
+    """One run's measures from its metrics.csv and eval.csv (NaN where a run never got there);
+    ``measured_by="success"`` (:attr:`Family.measured_by`): from eval_success.csv and success.csv
+    instead, the evaluations' success rates and the training episodes' success flags.
 
-    solved: some evaluation's mean return reached ``threshold``; episodes_to_solve and
-    steps_to_solve: the training episodes finished and the step at the first such evaluation;
-    held: the final evaluation is at the threshold; episodes_to_first_reward: the first training
-    episode whose return is above ``goal``; episodes: training episodes in all.
+    solved: some evaluation's mean return (success rate) reached ``threshold``;
+    episodes_to_solve and steps_to_solve: the training episodes finished and the step at the
+    first such evaluation; held: the final evaluation is at the threshold;
+    episodes_to_first_reward: the first training episode whose return (success) is above
+    ``goal``; episodes: training episodes in all.
     """
     m, e = run["metrics"] or {}, run["eval"] or {}
     ep_steps = m.get("global_step", np.array([]))
     returns = m.get("episodic_return", np.array([]))
     ev_steps = e.get("global_step", np.array([]))
     ev = e.get("eval_return_mean", np.array([]))
+    episode = np.arange(1.0, len(returns) + 1)
+    reached = returns
+    if measured_by == "success":
+        if len(ev) and run.get("eval_success") is None:
+            where = f" ({run['task']}, seed {run['seed']})" if "task" in run else ""
+            raise FarsighterError(
+                f"a run{where} has evaluations but no eval_success.csv: its environment reported "
+                "no info['is_success'] (a deep sea run recorded before the adapter did); run it "
+                "again"
+            )
+        e, s = run.get("eval_success") or {}, run.get("success") or {}
+        ev_steps = e.get("global_step", np.array([]))
+        ev = e.get("eval_success_rate", np.array([]))
+        episode = s.get("episode", np.array([]))
+        reached = s.get("success", np.array([]))
     hit = np.flatnonzero(ev >= threshold)
     first = float(ev_steps[hit[0]]) if len(hit) else float("nan")
-    reward = np.flatnonzero(returns > goal)
+    reward = np.flatnonzero(reached > goal)
     return {
         "solved": bool(len(hit)),
         "episodes_to_solve": float(np.sum(ep_steps <= first)) if len(hit) else float("nan"),
         "steps_to_solve": first,
         "held": bool(len(ev) and ev[-1] >= threshold),
-        "episodes_to_first_reward": float(reward[0] + 1) if len(reward) else float("nan"),
+        "episodes_to_first_reward": float(episode[reward[0]]) if len(reward) else float("nan"),
         "episodes": len(returns),
     }
 
@@ -528,7 +578,7 @@ def per_run(runs: Runs) -> list[dict[str, Any]]:
                     "agent": label,
                     "seed": run["seed"],
                     "budget": run["steps"],
-                    **measure(run, family.threshold_at(size), family.goal),
+                    **measure(run, family.threshold_at(size), family.goal, family.measured_by),
                     **bsuite_measure(run, size, family.bsuite),
                 }
             )
@@ -960,12 +1010,13 @@ def _plot_medians(
 _TEXT_HEAD = (
     "Each agent runs with one config on every task and size: the library's default for the task "
     "(`preset=auto`) and its own overrides, nothing tuned per task. A run **solved** a task when "
-    "some greedy evaluation's mean return reached the family's threshold; *episodes to solve* "
+    "some greedy evaluation's mean return (stochastic deep sea: its success rate, the fraction of "
+    "its episodes that took the treasure) reached the family's threshold; *episodes to solve* "
     "counts the training episodes finished at the first such evaluation (*steps to solve* "
     "likewise), so its resolution is the evaluation interval. *Held*: the final evaluation is at "
     "the threshold. *First reward*: the first training episode whose return shows the reward was "
-    "reached. An unsolved seed counts as its run's total (episodes, steps): a censored value, so a "
-    "median marked `>` is a lower bound."
+    "reached (stochastic deep sea: the first that took the treasure). An unsolved seed counts as "
+    "its run's total (episodes, steps): a censored value, so a median marked `>` is a lower bound."
 )
 _BSUITE_NOTE = (
     "Deep sea is also scored as bsuite scores it (`bsuite/experiments/deep_sea/analysis.py`), "
@@ -1149,7 +1200,7 @@ def _write_report(
             f"{r['budget']:,}",
             f"{FAMILIES[r['family']].eval_episodes} episode(s) every "
             f"{FAMILIES[r['family']].eval_every_at(r['size']):,} steps",
-            f"mean return >= {fmt(FAMILIES[r['family']].threshold_at(r['size']))}",
+            FAMILIES[r["family"]].rule_at(r["size"]),
         ]
         for r in dict((r["env"], r) for r in table).values()
     ]
@@ -1201,7 +1252,9 @@ STUDY = runner.Study(
     quick=QUICK,
     run_config=run_config,
     write_outputs=write_outputs,
-    run_files=("metrics.csv", "eval.csv", BAD_EPISODES_FILE),  # the last: deep sea runs only
+    # the last three: runs whose environment reports is_success (success.csv, eval_success.csv)
+    # or bad_episode (deep sea)
+    run_files=("metrics.csv", "eval.csv", SUCCESS_FILE, EVAL_SUCCESS_FILE, BAD_EPISODES_FILE),
     args=Args,
     callback=_bad_episode_log,
     check=_check,
