@@ -288,6 +288,21 @@ def test_solved_rules() -> None:
     sto = explore.FAMILIES["deepsea-stochastic"]
     assert deep is not None and deep.threshold == sto.threshold_at(10) == sto.threshold[1]
     assert kstudy.solved_rule("Nope-v0") is None
+    # stochastic deep sea's threshold is on the success rate (eval_success.csv), not the return
+    assert deep.success and deep.rule() == "success rate >= 0.194"
+    assert chain.rule() == ">= 0.5" and not chain.success
+    noisy = {
+        "eval": {"global_step": np.array([10.0, 20.0]), "eval_return_mean": np.array([0.1, 0.9])},
+        "eval_success": {"eval_success_rate": np.array([0.3, 0.1])},
+    }
+    assert kstudy.per_run(noisy, deep)["solved"] == 0.0  # a high return, a low success rate
+    assert kstudy.per_run(noisy, chain)["solved"] == 1.0  # a return rule reads the return
+    took = {**noisy, "eval_success": {"eval_success_rate": np.array([0.0, 0.2])}}
+    assert kstudy.per_run(took, deep)["solved"] == 1.0
+    assert np.isnan(kstudy.per_run({**noisy, "eval_success": None}, deep)["solved"])
+    assert kstudy.per_run(noisy, deep)["final"] == 0.9  # the return is still reported
+    (line,) = kstudy._setup(["farsighter/DeepSeaStochastic10-v0"])
+    assert "solved when the final evaluation success rate is >= 0.194 (" in line
 
 
 # ------------------------------------------------------------------------------------------------

@@ -27,6 +27,7 @@ import numpy as np
 from farsighter.config import Config
 from farsighter.envs.maze import DEFAULT_MAX_EPISODE_STEPS, ENV_ID, SMALL_ENV_ID
 from farsighter.errors import FarsighterError
+from farsighter.rundir import EVAL_SUCCESS_FILE
 from farsighter.studies import explore, maze, runner
 from farsighter.studies.claims import (
     CONFIDENCE,
@@ -171,12 +172,19 @@ class Solved:
     strict: bool
     """Solved above the threshold (else: at least the threshold)."""
     text: str
+    success: bool = False
+    """The threshold applies to the final evaluation's success rate (eval_success.csv), not its
+    mean return (an exploration family measured by success: stochastic deep sea)."""
 
     def __call__(self, value: float) -> bool:
         return bool(value > self.threshold if self.strict else value >= self.threshold)
 
-    def rule(self) -> str:
+    def comparison(self) -> str:
         return f"{'>' if self.strict else '>='} {fmt(float(self.threshold))}"
+
+    def rule(self) -> str:
+        """The comparison, named "success rate" where it applies to it (table.csv)."""
+        return f"success rate {self.comparison()}" if self.success else self.comparison()
 
 
 MAZE_SOLVED = Solved(
@@ -195,7 +203,12 @@ def solved_rule(env: str) -> Solved | None:
     if env in explore.TASKS:
         name, size = explore.TASKS[env]
         family = explore.FAMILIES[name]
-        return Solved(family.threshold_at(size), strict=False, text=family.solved)
+        return Solved(
+            family.threshold_at(size),
+            strict=False,
+            text=family.solved,
+            success=family.measured_by == "success",
+        )
     import gymnasium as gym
 
     try:
@@ -222,17 +235,22 @@ def area(steps: np.ndarray, returns: np.ndarray) -> float:
 
 def per_run(run: dict[str, Any], rule: Solved | None) -> dict[str, float]:
     """One run's final evaluation return, area under its evaluation curve, solved (1/0, NaN
-    where no rule is known) and final k (the last episode's, from metrics.csv)."""
+    where no rule is known; a rule on the success rate reads the final one, from
+    eval_success.csv) and final k (the last episode's, from metrics.csv)."""
     ev = run.get("eval") or {}
     steps = ev.get("global_step", np.array([]))
     returns = ev.get("eval_return_mean", np.array([]))
     final = float(returns[-1]) if len(returns) else float("nan")
+    judged = final
+    if rule and rule.success:
+        rates = (run.get("eval_success") or {}).get("eval_success_rate", np.array([]))
+        judged = float(rates[-1]) if len(rates) else float("nan")
     metrics = run.get("metrics") or {}
     k = metrics.get("k", np.array([]))
     return {
         "final": final,
         "auc": area(steps, returns),
-        "solved": float(rule(final)) if rule and np.isfinite(final) else float("nan"),
+        "solved": float(rule(judged)) if rule and np.isfinite(judged) else float("nan"),
         "final_k": float(k[-1]) if len(k) else float("nan"),
     }
 
@@ -501,7 +519,8 @@ def _setup(envs: Sequence[str]) -> list[str]:
         origin = "the maze study's" if is_maze(env) else "the library's defaults, with"
         rule = solved_rule(env)
         solved = (
-            f"solved when the final evaluation return is {rule.rule()} ({rule.text})"
+            f"solved when the final evaluation {'success rate' if rule.success else 'return'} "
+            f"is {rule.comparison()} ({rule.text})"
             if rule
             else "no solved threshold known (solved: n/a)"
         )
@@ -598,7 +617,7 @@ STUDY = runner.Study(
     quick=QUICK,
     run_config=run_config,
     write_outputs=write_outputs,
-    run_files=("eval.csv", "metrics.csv"),
+    run_files=("eval.csv", "metrics.csv", EVAL_SUCCESS_FILE),  # the last: is_success tasks only
     args=Args,
     check=_check,
     tasks=tasks,
