@@ -284,10 +284,21 @@ def test_auto_gives_discrete_tasks_the_general_preset_and_keeps_table_1_selectab
     assert make_config("bdqn", "CartPole-v1", preset="bdqn").blr.target == "thompson"
     atari = make_config("farsighter", "ALE/Pong-v5")
     assert (atari.preset, atari.blr.posterior_every, atari.blr.scale) == ("atari", 100_000, "fixed")
-    # the DQN family is the control column either way
-    ddqn_general = make_config("ddqn", "CartPole-v1")
-    ddqn_control = make_config("ddqn", "CartPole-v1", preset="control")
-    assert ddqn_general.lr == ddqn_control.lr and ddqn_general.eps_end == ddqn_control.eps_end
+    # one learner for every agent under general (a fair comparison); Table 1 under control
+    learner = ("optimizer", "lr", "train_every", "batch_size", "target_update_every")
+    learner += ("hidden_sizes", "buffer_size", "sample_recent", "eps_end")
+    agents = ("ddqn", "kddqn", "bdqn", "farsighter", "rnd", "krnd", "ob2i")
+    general = {a: make_config(a, "farsighter/Chain10-v0") for a in agents}
+    values = {a: tuple(getattr(c, f) for f in learner) for a, c in general.items()}
+    ob2i_eps = general["ob2i"].eps_end  # OB2I anneals epsilon to 0.1 (its authors' code)
+    values["ob2i"] = values["ob2i"][:-1] + (general["ddqn"].eps_end,)
+    assert len(set(values.values())) == 1, values
+    assert ob2i_eps == 0.1
+    assert (general["ddqn"].optimizer, general["ddqn"].target_update_every) == ("adam", 500)
+    assert general["farsighter"].sample_recent is False
+    paper = make_config("farsighter", "farsighter/Chain10-v0", preset="control")
+    assert tuple(getattr(paper, f) for f in learner[:5]) == ("rmsprop", 0.0025, 4, 32, 1_000)
+    assert paper.sample_recent is True  # Algorithm 1 line 4 under the paper's presets
     assert "general" in PRESETS and PRESETS["general"].per_algo["farsighter"]["k_target"] == "max"
     # a flag still wins over the preset's per-algorithm values
     assert make_config("farsighter", "CartPole-v1", blr__redraw="step").blr.redraw == "step"

@@ -181,6 +181,8 @@ def test_agents_are_one_config_each_on_the_auto_preset(tmp_path: Path) -> None:
         "Farsighter (redraw step)",
         "Farsighter (redraw k)",
         "Farsighter (redraw episode)",
+        "Farsighter (redraw revisit)",
+        "Farsighter (k-step target)",
         "OB2I",
         "RND",
     ]

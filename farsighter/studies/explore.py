@@ -299,6 +299,11 @@ AGENTS: tuple[Agent, ...] = (
     Agent("Farsighter (redraw step)", "farsighter", {"blr.redraw": "step"}),
     Agent("Farsighter (redraw k)", "farsighter", {"blr.redraw": "k"}),
     Agent("Farsighter (redraw episode)", "farsighter", {"blr.redraw": "episode"}),
+    # held while the episode reaches new states, redrawn when it returns to one
+    Agent("Farsighter (redraw revisit)", "farsighter", {"blr.redraw": "revisit"}),
+    # the plain k-step target, against the default's max with the one-step target (whose upward
+    # bias the stochastic deep sea tests)
+    Agent("Farsighter (k-step target)", "farsighter", {"k_target": "k"}),
     Agent("OB2I", "ob2i"),
     Agent("RND", "rnd"),
 )
