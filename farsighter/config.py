@@ -856,9 +856,10 @@ def _run_checks(cfg: Config, spec: algorithms.Algorithm) -> list[tuple[bool, str
             f"recent window ({cfg.effective_recent_window}) must not exceed buffer_size "
             f"({cfg.buffer_size})",
         ),
-        (
-            cfg.k <= cfg.buffer_size // cfg.num_envs,
-            f"k ({cfg.k}) must not exceed the per-environment buffer ({cfg.buffer_size // cfg.num_envs})",
+        (  # max(.., 1): the list is built whole, so a bad num_envs must not divide by zero here
+            cfg.k <= cfg.buffer_size // max(cfg.num_envs, 1),
+            f"k ({cfg.k}) must not exceed the per-environment buffer "
+            f"({cfg.buffer_size // max(cfg.num_envs, 1)})",
         ),
         (all(h > 0 for h in cfg.hidden_sizes), "hidden_sizes must be positive integers"),
         (cfg.atari.frame_skip >= 1, f"atari.frame_skip must be >= 1 (got {cfg.atari.frame_skip})"),
@@ -899,6 +900,12 @@ def _run_checks(cfg: Config, spec: algorithms.Algorithm) -> list[tuple[bool, str
             f"[{cfg.adaptive_k.k_min}, {cfg.adaptive_k.k_max}]",
         ),
         (cfg.eval_episodes >= 1, "eval_episodes must be >= 1"),
+        (
+            cfg.eval_every >= 0,
+            f"eval_every must be >= 0 (0: no periodic evaluation; got {cfg.eval_every})",
+        ),
+        (cfg.eval_max_steps >= 1, f"eval_max_steps must be >= 1 (got {cfg.eval_max_steps})"),
+        (cfg.log_every >= 1, f"log_every must be >= 1 (got {cfg.log_every})"),
         (cfg.checkpoint_every >= 0, "checkpoint_every must be >= 0"),
         (cfg.torch_threads >= 0, "torch_threads must be >= 0"),
         (

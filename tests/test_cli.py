@@ -85,11 +85,23 @@ def test_train_eval_and_presets(tmp_path: Path) -> None:
         (["--batch-size", "64", "--buffer-size", "32"], "must not exceed buffer_size"),
         (["--env", "Pendulum-v1"], "needs a discrete action space"),
         (["--preset", "nope"], "unknown preset 'nope'; accepted: auto"),
+        # integer fields the loop divides by or counts down to: refused, not a ZeroDivisionError
+        (["--num-envs", "0"], "num_envs must be >= 1 (got 0)"),
+        (["--num-envs", "-2"], "num_envs must be >= 1 (got -2)"),
+        (["--total-steps", "0"], "total_steps must be > 0 (got 0)"),
+        (["--batch-size", "0"], "batch_size must be > 0 (got 0)"),
+        (["--buffer-size", "-5"], "buffer_size must be > 0 (got -5)"),
+        (["--train-every", "0"], "train_every must be >= 1 (got 0)"),
+        (["--target-update-every", "0"], "target_update_every must be >= 1 (got 0)"),
+        (["--eval-episodes", "0"], "eval_episodes must be >= 1"),
+        (["--eval-every", "-1"], "eval_every must be >= 0 (0: no periodic evaluation; got -1)"),
+        (["--eval-max-steps", "0"], "eval_max_steps must be >= 1 (got 0)"),
+        (["--log-every", "0"], "log_every must be >= 1 (got 0)"),
     ],
 )
 def test_bad_input_is_one_line_exit_2(tmp_path: Path, args: list[str], needle: str) -> None:
     res = run_cli(
-        "train", *args, "--run-dir", "run", "--total-steps", "10", "--no-progress", cwd=tmp_path
+        "train", "--run-dir", "run", "--total-steps", "10", "--no-progress", *args, cwd=tmp_path
     )
     assert res.returncode == 2
     lines = res.stderr.strip().splitlines()
