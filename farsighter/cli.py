@@ -17,7 +17,7 @@ import tyro
 
 from farsighter.config import Config, load_config, make_config, resolve_preset_name
 from farsighter.errors import FarsighterError, RunDirError
-from farsighter.rundir import CONFIG_FILE
+from farsighter.rundir import CONFIG_FILE, check_same_run
 
 USAGE = """usage: farsighter <command> [options]
 
@@ -118,6 +118,8 @@ def train_config(argv: Sequence[str]) -> Config:
         description = "Train an agent. --algo, --env and --preset pick the defaults; any other "
         description += "field below overrides them. --resume continues a run with its saved config."
     cfg = tyro.cli(Config, default=default, args=list(argv), prog=prog, description=description)
+    if lead.resume:  # another --algo or --env: said so before a preset or a check that follows
+        check_same_run(cfg, saved=default)
     if cfg.preset != default.preset:  # given again: store the resolved name, as make_config does
         cfg = dataclasses.replace(cfg, preset=resolve_preset_name(cfg.preset, cfg.env, cfg.algo))
     return cfg

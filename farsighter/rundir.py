@@ -61,6 +61,37 @@ def slug(label: str) -> str:
     return "".join(c if c.isalnum() else "-" for c in label.lower()).strip("-").replace("--", "-")
 
 
+# What a run is: a resume that names other values is another run, refused before anything else.
+RUN_IDENTITY = ("algo", "env")
+
+
+def check_same_run(cfg: Config, saved: Config | None = None) -> None:
+    """With ``resume``: refuse another algorithm or environment than the saved run's, in one line
+    naming the saved and the given values. Checked first, so that the message is not about a
+    field that only follows from them (a ``k_target`` the other algorithm does not take).
+    ``saved``: the run's config, read from ``cfg``'s run directory when not given; a directory
+    without a run is left to :func:`prepare_run_dir` to refuse."""
+    if not cfg.resume:
+        return
+    path = cfg.resolved_run_dir
+    if saved is None:
+        if not (path / CONFIG_FILE).is_file():
+            return
+        saved = load_config(path / CONFIG_FILE)
+    diffs = [
+        f"{name} (saved {getattr(saved, name)!r}, given {getattr(cfg, name)!r})"
+        for name in RUN_IDENTITY
+        if getattr(saved, name) != getattr(cfg, name)
+    ]
+    if diffs:
+        raise RunDirError(
+            f"cannot resume the run in {path} as another run: "
+            + "; ".join(diffs)
+            + " (a resume continues the saved algo and env: drop those flags, or use a new "
+            "--run-dir)"
+        )
+
+
 def prepare_run_dir(cfg: Config) -> Path:
     """Create (or reopen with ``resume``) the run directory; never overwrite unless asked.
 
@@ -75,6 +106,7 @@ def prepare_run_dir(cfg: Config) -> Path:
         if not (path / CONFIG_FILE).is_file():
             raise RunDirError(f"cannot resume: {path} holds no run (no {CONFIG_FILE})")
         saved = load_config(path / CONFIG_FILE)
+        check_same_run(cfg, saved)
         diffs = [
             f"{f.name} (saved {getattr(saved, f.name)!r}, given {getattr(cfg, f.name)!r})"
             for f in dataclasses.fields(Config)

@@ -16,7 +16,7 @@ from farsighter.config import Config, load_config, validate
 from farsighter.envs import check_spaces, frame_stack_of, make_env, make_vector_env
 from farsighter.errors import ConfigError, RunDirError
 from farsighter.replay import VectorStep
-from farsighter.rundir import CONFIG_FILE, load_checkpoint, prepare_run_dir
+from farsighter.rundir import CONFIG_FILE, check_same_run, load_checkpoint, prepare_run_dir
 from farsighter.runtime import prepare_process
 from farsighter.session import (
     EvalResult,
@@ -68,6 +68,7 @@ def train(cfg: Config, callbacks: Sequence[Callback] = ()) -> dict[str, Any]:
     """Train ``cfg.algo`` on ``cfg.env``; returns the run's summary (also in summary.json).
 
     ``callbacks`` see every vector step's ``info`` and the agent, read-only by contract."""
+    check_same_run(cfg)  # a resume as another algorithm or env: said so before validate
     validate(cfg)
     device = resolve_device(cfg.device)
     graphs_enabled(cfg.cuda_graph, device)  # cuda_graph on with no GPU: refused

@@ -12,6 +12,7 @@ import pytest
 from farsighter.cli import train_config
 from farsighter.config import make_config, save_config
 from farsighter.errors import ConfigError, RunDirError
+from farsighter.train import train
 from tests.test_cli import run_cli
 
 FIRST = [
@@ -80,6 +81,30 @@ def test_resume_alone_continues_with_the_saved_config(tmp_path: Path) -> None:
     res = run_cli("train", "--run-dir", "nowhere", "--resume", cwd=tmp_path)
     one_line_error(res, "cannot resume: nowhere holds no run (no config.json)")
     assert not (tmp_path / "nowhere").exists()
+
+
+def test_resume_as_another_algo_or_env_is_refused_first(tmp_path: Path) -> None:
+    res = run_cli("train", "--run-dir", "run", *FIRST, "--algo", "farsighter", cwd=tmp_path)
+    assert res.returncode == 0, res.stderr
+    saved = (tmp_path / "run" / "config.json").read_text()
+    # the saved run holds a value ddqn refuses: the message must be about the algorithm
+    assert json.loads(saved)["k_target"] == "max"
+    res = run_cli("train", "--algo", "ddqn", "--resume", "--run-dir", "run", cwd=tmp_path)
+    one_line_error(
+        res, "cannot resume the run in run as another run: algo (saved 'farsighter', given 'ddqn')"
+    )
+    assert "k_target" not in res.stderr
+    res = run_cli("train", "--resume", "--run-dir", "run", "--env", "Acrobot-v1", cwd=tmp_path)
+    one_line_error(res, "as another run: env (saved 'CartPole-v1', given 'Acrobot-v1')")
+    res = run_cli(
+        "train", "--resume", "--run-dir", "run", "--algo=bdqn", "--env=Acrobot-v1", cwd=tmp_path
+    )
+    one_line_error(res, "algo (saved 'farsighter', given 'bdqn'); env (saved 'CartPole-v1'")
+    assert (tmp_path / "run" / "config.json").read_text() == saved  # nothing recorded
+    # the library's train() too, before validate and before any environment is made
+    cfg = make_config("ddqn", "CartPole-v1", run_dir=str(tmp_path / "run"), resume=True)
+    with pytest.raises(RunDirError, match=r"algo \(saved 'farsighter', given 'ddqn'\)"):
+        train(cfg)
 
 
 def test_resume_finds_the_default_run_dir(tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> None:
