@@ -258,6 +258,63 @@ def test_k_target_max_is_the_larger_of_the_k_and_one_step_targets(
     assert torch.equal(trained, torch.maximum(y_k, y_1))
 
 
+def _sampled_rows(preset: str, tmp_path: Path) -> tuple[np.ndarray, int, FarsighterAgent]:
+    """The replay rows of 20 updates of Farsighter on a 20-state chain under ``preset``, after
+    3,000 stored transitions; also the rows stored and the agent."""
+    cfg = make_config(
+        "farsighter",
+        chain_id(20),
+        preset=preset,
+        learning_starts=0,
+        run_dir=str(tmp_path / preset),
+        progress=False,
+    )
+    env = make_env(cfg, seed=0)
+    agent = FarsighterAgent(
+        cfg, env.observation_space, env.action_space, frame_stack=1, device=torch.device("cpu")
+    )
+    rng = np.random.default_rng(0)
+    obs, _ = env.reset(seed=0)
+    for _ in range(3_000):
+        action = rng.integers(0, 2, size=1)
+        nxt, reward, term, trunc, _ = env.step(int(action[0]))
+        end = term or trunc
+        agent.observe(
+            VectorStep(
+                obs[None],
+                action,
+                np.array([reward]),
+                np.array([term]),
+                np.array([trunc]),
+                [nxt] if end else None,
+            )
+        )
+        obs = env.reset()[0] if end else nxt
+    rows = []
+    sample = agent._sample
+
+    def spy():  # the minibatch each update trains on
+        batch = sample()
+        rows.append(batch.index)
+        return batch
+
+    agent._sample = spy  # type: ignore[method-assign]
+    for _ in range(20):
+        agent.update()
+    return np.concatenate(rows), 3_000, agent
+
+
+def test_the_general_learner_trains_on_the_whole_replay_with_adam(tmp_path: Path) -> None:
+    """The default (general) learner draws its minibatches from the whole replay, where Table
+    1's (control) draws them from the latest N = 1,000 transitions (Algorithm 1 line 4)."""
+    rows, stored, agent = _sampled_rows("general", tmp_path)
+    assert isinstance(agent.opt, torch.optim.Adam) and len(rows) == 20 * 64
+    assert rows.min() < stored - 1_000 - 500  # reaches well behind any latest-N window
+    rows, stored, agent = _sampled_rows("control", tmp_path)
+    assert isinstance(agent.opt, torch.optim.RMSprop) and len(rows) == 20 * 32
+    assert rows.min() >= stored - 1_000
+
+
 # ------------------------------------------------------------------ presets
 def test_auto_gives_discrete_tasks_the_general_preset_and_keeps_table_1_selectable() -> None:
     cfg = make_config("farsighter", "farsighter/Chain10-v0")
