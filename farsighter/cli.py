@@ -136,15 +136,23 @@ def cmd_train(argv: Sequence[str]) -> int:
 def cmd_eval(argv: Sequence[str]) -> int:
     import numpy as np
 
+    from farsighter.envs import make_eval_envs
+    from farsighter.session import EVAL_MAX_ENVS
     from farsighter.train import evaluate_episodes, load_agent
 
     args = tyro.cli(EvalArgs, args=list(argv), prog="farsighter eval")
     if args.episodes < 1:
         raise FarsighterError(f"--episodes must be >= 1 (got {args.episodes})")
     policy = load_agent(args.run_dir, device=args.device)
-    env = policy.make_env(seed=args.seed)
-    result = evaluate_episodes(policy.agent, policy.config, env, args.episodes, args.seed, 0)
-    env.close()
+    cfg = policy.config
+    envs = make_eval_envs(cfg, min(args.episodes, EVAL_MAX_ENVS), seed=args.seed)
+    try:
+        result = evaluate_episodes(
+            policy.agent, cfg, envs, args.episodes, args.seed, 0, progress=cfg.progress
+        )
+    finally:
+        for env in envs:
+            env.close()
     returns = result.returns
     report = {
         "run_dir": args.run_dir,

@@ -9,7 +9,7 @@ import json
 import pickle
 import time
 from collections import deque
-from collections.abc import Mapping
+from collections.abc import Mapping, Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
@@ -126,31 +126,100 @@ class EvalResult:
     successes: list[float]
 
 
+EVAL_MAX_ENVS = 32
+"""Most environments an evaluation steps at once; more episodes run in turn through them (the
+returns do not depend on how many run at once)."""
+
+
+@dataclass
+class _Running:
+    """An evaluation episode in progress in one environment of the batch."""
+
+    episode: int
+    obs: Any
+    rng: np.random.Generator
+    total: float = 0.0
+    steps: int = 0
+
+
 def evaluate_episodes(
-    agent: Agent, cfg: Config, env: gym.Env, episodes: int, seed: int, global_step: int
+    agent: Agent,
+    cfg: Config,
+    envs: Sequence[gym.Env],
+    episodes: int,
+    seed: int,
+    global_step: int,
+    progress: bool = False,
 ) -> EvalResult:
-    """Greedy episodes (eval_epsilon-greedy for discrete actions; the posterior mean / noiseless
-    mu for continuous ones) on an unclipped, non-life-loss environment."""
-    rng = np.random.default_rng(seed)
-    returns: list[float] = []
-    successes: list[float] = []
-    n_actions = int(env.action_space.n) if isinstance(env.action_space, gym.spaces.Discrete) else 0
-    for i in range(episodes):
-        obs, info = env.reset(seed=seed if i == 0 else None)
-        total, steps, done = 0.0, 0, False
-        while not done and steps < cfg.eval_max_steps:
-            if n_actions and rng.random() < cfg.eval_epsilon:
-                action = int(rng.integers(n_actions))
-            else:
-                action = agent.act(np.asarray(obs)[None], global_step, explore=False)[0]
-            obs, reward, terminated, truncated, info = env.step(action)
-            total += float(reward)
-            steps += 1
-            done = terminated or truncated
-        returns.append(total)
-        if "is_success" in info:
-            successes.append(float(info["is_success"]))
-    return EvalResult(returns, successes)
+    """``episodes`` greedy episodes (eval_epsilon-greedy for discrete actions; the posterior mean
+    / noiseless mu for continuous ones) on evaluation environments (unclipped rewards, no
+    life-loss terminals: :func:`farsighter.envs.make_eval_envs`), run as a batch: up to
+    ``len(envs)`` at once with one forward pass over the running ones per step, each environment
+    taking the next episode when its own ends (terminated, truncated, or after
+    ``cfg.eval_max_steps`` steps).
+
+    Episode ``i`` starts from ``reset(seed=seed + i)`` and draws its eval_epsilon coins (one per
+    step, and the random action when it comes up) from its own ``default_rng(seed + i)``; so
+    episode 0 is the one the earlier, sequential evaluation ran first, and no episode depends
+    on the batch's width or on the other episodes: for a deterministic greedy policy each returns
+    what it returns stepped alone. (The sequential evaluation let episodes 1, 2, ... continue its
+    one environment's generators; environments side by side cannot share them, and seeding them
+    alike would give every episode of a stochastic task the same noise.) The agent's generators
+    are not touched (``act(explore=False)`` draws nothing). Returns (and ``info["is_success"]``
+    at each end, where reported) are listed in episode order. ``progress``: a bar of the
+    finished episodes, with the steps of the longest running one."""
+    if not envs:
+        raise ValueError("evaluate_episodes needs at least one environment")
+    space = envs[0].action_space
+    n_actions = int(space.n) if isinstance(space, gym.spaces.Discrete) else 0
+    returns = [0.0] * episodes
+    success_of: list[float | None] = [None] * episodes
+    running: dict[int, _Running] = {}  # environment index -> its episode
+    queued = iter(range(episodes))
+
+    def start(slot: int) -> None:
+        i = next(queued, None)
+        if i is not None:
+            obs, _ = envs[slot].reset(seed=seed + i)
+            running[slot] = _Running(i, obs, np.random.default_rng(seed + i))
+
+    for slot in range(min(len(envs), episodes)):
+        start(slot)
+    bar = tqdm(
+        total=episodes,
+        unit="episode",
+        desc=f"eval at step {global_step}",
+        disable=not progress,
+        leave=False,
+        dynamic_ncols=True,
+    )
+    shown = time.perf_counter()
+    try:
+        while running:
+            slots = sorted(running)
+            obs_E = np.stack([np.asarray(running[slot].obs) for slot in slots])
+            actions_E = agent.act(obs_E, global_step, explore=False)
+            for slot, action in zip(slots, actions_E, strict=True):
+                run = running[slot]
+                if n_actions and run.rng.random() < cfg.eval_epsilon:
+                    action = int(run.rng.integers(n_actions))
+                run.obs, reward, terminated, truncated, info = envs[slot].step(action)
+                run.total += float(reward)
+                run.steps += 1
+                if terminated or truncated or run.steps >= cfg.eval_max_steps:
+                    returns[run.episode] = run.total
+                    if "is_success" in info:
+                        success_of[run.episode] = float(info["is_success"])
+                    del running[slot]
+                    bar.update(1)
+                    start(slot)
+            if progress and running and time.perf_counter() - shown >= 1.0:
+                longest = max(run.steps for run in running.values())
+                bar.set_postfix_str(f"step {longest:,} of at most {cfg.eval_max_steps:,}")
+                shown = time.perf_counter()
+    finally:
+        bar.close()
+    return EvalResult(returns, [s for s in success_of if s is not None])
 
 
 # --------------------------------------------------------------------------------------------
@@ -189,7 +258,7 @@ class RunLog:
     def __init__(self, path: Path, cfg: Config, state: LoopState, resumed: bool) -> None:
         self.path, self.cfg = path, cfg
         self.logger = RunLogger(path, resume_step=state.global_step if resumed else None)
-        self.eval_env = _make_eval_env(cfg)
+        self.eval_envs = _make_eval_envs(cfg)
         self.bar = tqdm(
             total=cfg.total_steps,
             initial=state.global_step,
@@ -273,7 +342,9 @@ class RunLog:
         cfg, log, step = self.cfg, self.logger, state.global_step
         state.evals += 1
         seed = cfg.seed + 7919 * state.evals
-        result = evaluate_episodes(agent, cfg, self.eval_env, cfg.eval_episodes, seed, step)
+        result = evaluate_episodes(
+            agent, cfg, self.eval_envs, cfg.eval_episodes, seed, step, progress=cfg.progress
+        )
         mean, std = float(np.mean(result.returns)), float(np.std(result.returns))
         if result.successes:
             rate = float(np.mean(result.successes))
@@ -326,10 +397,12 @@ class RunLog:
     def close(self) -> None:
         self.bar.close()
         self.logger.close()
-        self.eval_env.close()
+        for env in self.eval_envs:
+            env.close()
 
 
-def _make_eval_env(cfg: Config) -> gym.Env:
-    from farsighter.envs import make_env
+def _make_eval_envs(cfg: Config) -> list[gym.Env]:
+    from farsighter.envs import make_eval_envs
 
-    return make_env(cfg, seed=cfg.seed + 1_000_003, training=False)
+    count = min(cfg.eval_episodes, EVAL_MAX_ENVS)
+    return make_eval_envs(cfg, count, seed=cfg.seed + 1_000_003)

@@ -12,7 +12,7 @@ import numpy as np
 import pytest
 
 from farsighter.config import make_config
-from farsighter.envs import make_env, make_vector_env
+from farsighter.envs import make_env, make_eval_envs, make_vector_env
 from farsighter.envs.deep_sea import BSUITE_MAPPING_SEED, deep_sea_id
 from farsighter.session import evaluate_episodes, finished_episodes
 
@@ -137,18 +137,19 @@ def test_the_loop_reads_the_success_in_training_and_in_evaluation() -> None:
             self.env = env
 
         def act(self, obs: np.ndarray, step: int, explore: bool) -> np.ndarray:
-            return np.array([_right(self.env, obs[0])])
+            return np.array([_right(self.env, o) for o in obs])  # one row per running episode
 
     for stochastic in (False, True):
         cfg = make_config("ddqn", deep_sea_id(size, stochastic))
-        env = make_env(cfg, seed=0, training=False)
-        result = evaluate_episodes(Right(env), cfg, env, 30, seed=2, global_step=0)  # type: ignore[arg-type]
+        evals = make_eval_envs(cfg, 4, seed=0)  # 30 episodes through 4 environments
+        result = evaluate_episodes(Right(evals[0]), cfg, evals, 30, seed=2, global_step=0)  # type: ignore[arg-type]
         assert len(result.successes) == len(result.returns) == 30
         if stochastic:  # some right moves failed, and the returns are noisy
             assert 0 < sum(result.successes) < 30
         else:
             assert result.successes == [1.0] * 30
-        env.close()
+        for env in evals:
+            env.close()
 
 
 def _trajectories(env: gym.Env, seed: int, episodes: int = 5) -> tuple[np.ndarray, np.ndarray]:

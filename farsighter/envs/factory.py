@@ -137,6 +137,22 @@ def make_env(
     return env
 
 
+def make_eval_envs(cfg: Config, count: int, *, seed: int) -> list[gym.Env]:
+    """``count`` evaluation environments, stepped as a batch by
+    :func:`farsighter.session.evaluate_episodes`: each is ``make_env(training=False)`` (for ALE
+    ids no life-loss terminals and unclipped rewards, always the Gymnasium wrappers), environment
+    ``i`` with its spaces seeded ``seed + i``. Each episode reseeds its environment on reset."""
+    envs: list[gym.Env] = []
+    try:
+        for i in range(count):
+            envs.append(make_env(cfg, seed=seed + i, training=False))
+    except BaseException:
+        for env in envs:
+            env.close()
+        raise
+    return envs
+
+
 def _preprocessing(cfg: Config, training: bool) -> dict[str, Any]:
     """The Atari preprocessing settings both backends take (Gymnasium wrappers and envpool)."""
     a = cfg.atari
