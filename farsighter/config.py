@@ -269,11 +269,13 @@ class Config:
     """auto (CUDA when present, else CPU), cpu, cuda or cuda:N."""
     precision: Literal["fp32", "bf16"] = "fp32"
     """Arithmetic of the networks' torsos: fp32, or bf16 autocast (bfloat16 convolutions and
-    matmuls; about 1.7x faster Atari updates on CPUs with AVX-512 BF16 or AMX; no faster on an
-    H100 at batch 32, where the update is bound by kernel launches; slow where the hardware
-    lacks bfloat16). Features, heads, the BLR posterior,
-    targets, losses, parameters and optimizer state stay fp32 either way. Never on unless
-    asked; docs/design.md gives its measured effect on learning."""
+    matmuls). Its speed depends on the CPU, not only on its flags, so measure it there
+    (python -m benchmarks.update_profile): Atari updates 1.37x faster on one of this project's
+    machines (AVX-512 BF16, no AMX: 13.9 ms against 19.1 ms fp32), slower on a user's CPU with
+    the same flags (38.9 ms against 26.9 ms fp32; issue #26); no faster on an H100 at batch 32, where
+    the update is bound by kernel launches; slow where the hardware lacks bfloat16. Features,
+    heads, the BLR posterior, targets, losses, parameters and optimizer state stay fp32 either
+    way. Never on unless asked; docs/design.md gives its measured effect on learning."""
     cuda_graph: Literal["auto", "on", "off"] = "auto"
     """Capture the update step (forward, loss, backward, optimizer) as a CUDA graph and replay it
     each update, so the host launches it once instead of kernel by kernel
