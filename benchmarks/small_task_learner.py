@@ -62,6 +62,8 @@ AGENTS: dict[str, tuple[str, dict[str, Any]]] = {
     "farsighter-revisit": ("farsighter", {"blr.redraw": "revisit"}),
     "farsighter-episode": ("farsighter", {"blr.redraw": "episode"}),
     "farsighter-k": ("farsighter", {"blr.redraw": "k"}),
+    "farsighter-cov0.1": ("farsighter", {"blr.cov_scale": 0.1}),
+    "farsighter-cov0.01": ("farsighter", {"blr.cov_scale": 0.01}),
     "bdqn": ("bdqn", {}),
     "ddqn": ("ddqn", {}),
     "kddqn": ("kddqn", {}),
