@@ -28,7 +28,7 @@ import tyro
 from farsighter.config import Config, make_config, validate
 from farsighter.errors import ConfigError, FarsighterError
 from farsighter.rundir import slug
-from farsighter.sweep.engine import Backend, Progress, execute
+from farsighter.sweep.engine import Backend, Progress, execute, parse_address, ray_init
 
 Runs = dict[str, list[dict[str, Any]]]
 """Per agent label, one dict per finished run: ``"seed"``, ``"steps"`` (its budget), ``"task"``
@@ -219,6 +219,8 @@ def main(study: Study, argv: Sequence[str]) -> int:
     check(study, settings)
     backend = backend_of(args, settings.workers)
     out = out_dir(study, settings, args)
+    if backend.address is not None:
+        ray_init(backend)  # join (or fail) before the study directory is touched
     if args.overwrite and out.exists():
         shutil.rmtree(out)
     t0 = time.perf_counter()
@@ -233,6 +235,8 @@ def backend_of(args: StudyArgs, workers: int) -> Backend:
     """Where the runs go: --workers, --retries, --ray, --address (checked: one line, exit 2)."""
     if args.address is not None and not args.ray:
         raise FarsighterError("--address joins a Ray cluster and needs --ray")
+    if args.address is not None:
+        parse_address(args.address)
     if args.retries < 0:
         raise FarsighterError(f"--retries must be >= 0 (got {args.retries})")
     return Backend(workers=workers, retries=args.retries, ray=args.ray, address=args.address)

@@ -33,7 +33,7 @@ import tyro
 
 from farsighter.errors import FarsighterError
 from farsighter.rundir import CHECKPOINT_FILE, EVAL_FILE, SUMMARY_FILE
-from farsighter.sweep.engine import Backend, Progress, execute
+from farsighter.sweep.engine import Backend, Progress, execute, parse_address, ray_init
 from farsighter.sweep.spec import SweepError, SweepSpec, Trial, load_spec
 
 
@@ -86,6 +86,8 @@ def main(argv: Sequence[str]) -> int:
         cpus=res.cpus,
         gpus=res.gpus,
     )
+    if backend.address is not None:
+        parse_address(backend.address)
     if args.dry_run:
         todo = unfinished(spec, out)
         for trial in spec.trials:
@@ -93,6 +95,8 @@ def main(argv: Sequence[str]) -> int:
             print(f"{trial.name}  ({trial.algo}, {_steps(trial):,} steps)  {state}")
         print(f"{len(spec.trials)} trials, {len(todo)} to run, in {out}, on {backend.describe()}")
         return 0
+    if backend.address is not None:
+        ray_init(backend)  # join (or fail) before the sweep directory is touched
     if args.overwrite and out.exists():
         shutil.rmtree(out)
     t0 = time.perf_counter()
