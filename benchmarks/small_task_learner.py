@@ -109,12 +109,13 @@ def task_of(name: str) -> dict[str, Any]:
 
 
 def bsuite_episode(returns: np.ndarray, size: int, thresh: float = 0.9) -> float:
-    """bsuite's deep sea criterion: the first episode (1-based) at which the running fraction
-    of bad episodes (here: episodes without the reward) falls below ``thresh``; NaN if never."""
-    bad = np.cumsum(returns < 0.5)
-    frac = bad / np.arange(1, len(returns) + 1)
-    hit = np.flatnonzero(frac < thresh)
-    return float(hit[0] + 1) if len(hit) else float("nan")
+    """bsuite's deep sea criterion (:func:`farsighter.studies.explore.bsuite_solution`) with an
+    episode counted bad exactly when it misses the reward (true of the deterministic task); NaN
+    if never met."""
+    from farsighter.studies.explore import bsuite_solution
+
+    episode = bsuite_solution(returns < 0.5, thresh)
+    return float("nan") if episode is None else float(episode)
 
 
 def _read(path: Path) -> dict[str, np.ndarray]:
