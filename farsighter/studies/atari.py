@@ -31,9 +31,10 @@ from farsighter.envs.atari import ATARI_49, TABLE2, ale_id, game_of
 from farsighter.envs.atari_scores import human_normalized
 from farsighter.envs.minatar import MINATAR_GAMES, minatar_id
 from farsighter.errors import FarsighterError
+from farsighter.plots import band, figure, finish_axes, markdown_table
 from farsighter.studies import runner
 from farsighter.studies.claims import Measure, compare
-from farsighter.studies.runner import Agent, Runs, StudyArgs, Task, band, figure
+from farsighter.studies.runner import Agent, Runs, StudyArgs, Task
 
 AGENTS: tuple[Agent, ...] = (
     Agent("DDQN", "ddqn"),
@@ -382,7 +383,7 @@ def _table(rows: list[dict[str, Any]]) -> str:
         ]
         for r in rows
     ]
-    return runner.markdown_table(head, cells)
+    return markdown_table(head, cells)
 
 
 def _aggregate_table(agg: list[dict[str, Any]]) -> str:
@@ -398,7 +399,7 @@ def _aggregate_table(agg: list[dict[str, Any]]) -> str:
         ]
         for a in agg
     ]
-    return runner.markdown_table(head, cells)
+    return markdown_table(head, cells)
 
 
 def _plot(study: dict[str, Any], runs: Runs, file: Path) -> None:
@@ -415,7 +416,7 @@ def _plot(study: dict[str, Any], runs: Runs, file: Path) -> None:
                 steps = mine[0]["eval"]["global_step"][:n]
                 values = np.array([r["eval"]["eval_return_mean"][:n] for r in mine], dtype=float)
                 band(ax, steps, values, f"C{i}", label)
-            runner.finish_axes(ax, "agent steps", "evaluation return", game_name(env))
+            finish_axes(ax, "agent steps", "evaluation return", game_name(env))
         for ax in list(axes.flat)[len(envs) :]:
             ax.set_visible(False)
 

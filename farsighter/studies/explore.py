@@ -31,10 +31,11 @@ from farsighter.config import Config
 from farsighter.envs.chain import SOLVED_RETURN, chain_id
 from farsighter.envs.deep_sea import deep_sea_id
 from farsighter.errors import FarsighterError
+from farsighter.plots import figure, finish_axes, markdown_table
 from farsighter.rundir import EVAL_SUCCESS_FILE, SUCCESS_FILE
 from farsighter.studies import runner
 from farsighter.studies.claims import fmt
-from farsighter.studies.runner import Agent, Runs, StudyArgs, Task, figure
+from farsighter.studies.runner import Agent, Runs, StudyArgs, Task
 
 BSUITE_NUM_EPISODES = 10_000
 """Episodes of a bsuite deep sea run (its sweep's NUM_EPISODES); its analysis looks no further."""
@@ -888,7 +889,7 @@ def _markdown_table(table: list[dict[str, Any]]) -> str:
         ]
         for r in table
     ]
-    return runner.markdown_table(head, cells)
+    return markdown_table(head, cells)
 
 
 def _fitted(fit: dict[str, Any]) -> bool:
@@ -934,7 +935,7 @@ def _markdown_growth(fits: list[dict[str, Any]]) -> str:
                 f["better"],
             ]
         )
-    return runner.markdown_table(head, cells)
+    return markdown_table(head, cells)
 
 
 def _plot(family: str, table: list[dict[str, Any]], fits: list[dict[str, Any]], file: Path) -> None:
@@ -967,7 +968,7 @@ def _plot(family: str, table: list[dict[str, Any]], fits: list[dict[str, Any]], 
                 )
                 _plot_medians(ax, [r for r in mine if r[m.solved]], m, fit, agent, color)
         ax0.set_ylim(-0.05, 1.05)
-        runner.finish_axes(ax0, fam.size, "fraction of seeds solved", f"{family}: solved")
+        finish_axes(ax0, fam.size, "fraction of seeds solved", f"{family}: solved")
         sizes = sorted({r["size"] for r in rows})
         for ax in axes:  # ticks at the sizes run
             if ax is not ax0:
@@ -1210,7 +1211,7 @@ def _write_report(
         for r in dict((r["env"], r) for r in table).values()
     ]
     head = ["family", "size", "environment", "budget (steps)", "evaluation", "solved at"]
-    lines += runner.markdown_table(head, tasks).splitlines()
+    lines += markdown_table(head, tasks).splitlines()
     lines += [""]
     lines += [f"- {name}: {FAMILIES[name].solved}." for name in families]
     if any(FAMILIES[name].bsuite for name in families):

@@ -27,6 +27,7 @@ import numpy as np
 from farsighter.config import Config
 from farsighter.envs.maze import DEFAULT_MAX_EPISODE_STEPS, ENV_ID, SMALL_ENV_ID
 from farsighter.errors import FarsighterError
+from farsighter.plots import band, figure, finish_axes, markdown_table
 from farsighter.rundir import EVAL_SUCCESS_FILE
 from farsighter.studies import explore, maze, runner
 from farsighter.studies.claims import (
@@ -39,7 +40,7 @@ from farsighter.studies.claims import (
     compare,
     fmt,
 )
-from farsighter.studies.runner import Agent, Runs, StudyArgs, Task, band, figure
+from farsighter.studies.runner import Agent, Runs, StudyArgs, Task
 
 KS: tuple[int, ...] = (1, 10, 50, 150, 500)
 """The fixed k of Figure 4 (k = 1, one-step uncertainty as BDQN, is the left end)."""
@@ -428,7 +429,7 @@ def _table(rows: list[dict[str, Any]]) -> str:
         ]
         for r in rows
     ]
-    return runner.markdown_table(head, cells)
+    return markdown_table(head, cells)
 
 
 def _envs(runs: Runs) -> list[str]:
@@ -453,7 +454,7 @@ def _plot_curves(runs: Runs, file: Path) -> None:
                 steps = mine[0]["eval"]["global_step"][:n]
                 values = np.array([r["eval"]["eval_return_mean"][:n] for r in mine], dtype=float)
                 band(ax, steps, values, COLORS.get(label), label)
-            runner.finish_axes(ax, "environment steps", "evaluation return", env)
+            finish_axes(ax, "environment steps", "evaluation return", env)
         for ax in list(axes.flat)[len(envs) :]:
             ax.set_visible(False)
 
@@ -486,7 +487,7 @@ def _plot_k_curve(rows: list[dict[str, Any]], file: Path) -> None:
                     mean, std = r["final_return_mean"], r["final_return_std"]
                     ax.axhline(mean, color="C3", ls="--", label="adaptive k (mean ± std)")
                     ax.axhspan(mean - std, mean + std, color="C3", alpha=0.15)
-            runner.finish_axes(ax, "k (log scale)", "final evaluation return", env)
+            finish_axes(ax, "k (log scale)", "final evaluation return", env)
         for ax in list(axes.flat)[len(envs) :]:
             ax.set_visible(False)
 

@@ -21,6 +21,7 @@ from farsighter.config import Config
 from farsighter.envs.maze import DEFAULT_MAX_EPISODE_STEPS, ENV_ID
 from farsighter.envs.maze import DEFAULT_START_VALUE as Q_STAR
 from farsighter.errors import FarsighterError
+from farsighter.plots import band, figure, finish_axes, markdown_table
 from farsighter.studies import runner
 from farsighter.studies.claims import (
     CONFIDENCE,
@@ -32,7 +33,7 @@ from farsighter.studies.claims import (
     compare,
     fmt,
 )
-from farsighter.studies.runner import Agent, Runs, band, figure, finish_axes
+from farsighter.studies.runner import Agent, Runs
 
 # Every agent runs with the `maze` preset (`farsighter presets`: the shared settings, identical
 # across methods as the paper keeps them) and its overrides below.
@@ -304,7 +305,7 @@ def _markdown_table(rows: list[dict[str, Any]]) -> str:
     for r in rows:
         r = {**r, "greedy_solves": f"{r['greedy_success_seeds']}/{r['seeds']}"}
         cells.append([fmt(r[key]) for _, key in MARKDOWN_COLUMNS])
-    return runner.markdown_table([head for head, _ in MARKDOWN_COLUMNS], cells)
+    return markdown_table([head for head, _ in MARKDOWN_COLUMNS], cells)
 
 
 # ------------------------------------------------------------------------------------------------

@@ -21,8 +21,9 @@ import tyro
 
 from farsighter.config import Config
 from farsighter.errors import FarsighterError
+from farsighter.plots import band, figure, finish_axes, markdown_table
 from farsighter.studies import runner
-from farsighter.studies.runner import Agent, Runs, StudyArgs, band, figure, finish_axes, slug
+from farsighter.studies.runner import Agent, Runs, StudyArgs, slug
 
 AGENTS: tuple[Agent, ...] = (
     Agent("NAF", "naf"),
@@ -198,7 +199,7 @@ def _markdown_table(rows: list[dict[str, Any]], goal: bool) -> str:
         if goal:
             cells.insert(2, _pm(r["final_success_mean"], r["final_success_std"], 2))
         table.append(cells)
-    return runner.markdown_table(head, table)
+    return markdown_table(head, table)
 
 
 def _claims(by: dict[str, float], measure: str) -> list[str]:

@@ -15,9 +15,7 @@ import dataclasses
 import json
 import shutil
 import time
-import warnings
-from collections.abc import Callable, Iterable, Iterator, Sequence
-from contextlib import contextmanager
+from collections.abc import Callable, Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Annotated, Any, Protocol
@@ -457,57 +455,3 @@ def _read(file: Path) -> Any:
     if file.suffix == ".npy":
         return np.load(file)
     return json.loads(file.read_text())
-
-
-def markdown_table(head: Sequence[str], rows: Iterable[Sequence[str]]) -> str:
-    """A Markdown table: the header, the rule, one line per row of cells (already text)."""
-    lines = ["| " + " | ".join(head) + " |", "|" + "---|" * len(head)]
-    lines += ["| " + " | ".join(cells) + " |" for cells in rows]
-    return "\n".join(lines) + "\n"
-
-
-@contextmanager
-def figure(file: Path, *args: Any, **kwargs: Any) -> Iterator[tuple[Any, Any]]:
-    """``plt.subplots(*args, **kwargs)``, saved to ``file`` when the block ends."""
-    import matplotlib
-
-    matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
-
-    fig, axes = plt.subplots(*args, **kwargs)
-    try:
-        yield fig, axes
-        fig.tight_layout()
-        fig.savefig(file, dpi=120)
-    finally:
-        plt.close(fig)
-
-
-def band(ax: Any, x: np.ndarray, curves: np.ndarray, color: Any, label: str | None) -> None:
-    """The mean over seeds (rows of ``curves``, NaN where a seed has no value) and a band of one
-    standard deviation."""
-    with warnings.catch_warnings():  # a point where every seed is NaN stays NaN
-        warnings.simplefilter("ignore", RuntimeWarning)
-        mean, std = np.nanmean(curves, axis=0), np.nanstd(curves, axis=0)
-    ax.plot(x, mean, color=color, label=label)
-    ax.fill_between(x, mean - std, mean + std, color=color, alpha=0.15)
-
-
-def short_count(x: float) -> str:
-    """A step count for an axis: 0, 500, 10k, 12.5k, 1.5M."""
-    for div, unit in ((1e6, "M"), (1e3, "k")):
-        if abs(x) >= div:
-            return f"{x / div:g}{unit}"
-    return f"{x:g}"
-
-
-def finish_axes(ax: Any, xlabel: str, ylabel: str, title: str, **legend: Any) -> None:
-    """Labels, title, legend and grid of a curve plot; step counts read 10k, 1.5M."""
-    from matplotlib.ticker import FuncFormatter
-
-    ax.xaxis.set_major_formatter(FuncFormatter(lambda x, _: short_count(x)))
-    ax.set_xlabel(xlabel)
-    ax.set_ylabel(ylabel)
-    ax.set_title(title)
-    ax.legend(**{"fontsize": 8, **legend})
-    ax.grid(alpha=0.3)

@@ -305,8 +305,7 @@ _NORM_TEXT = {
 
 
 def _plot_curves(spec: SweepSpec, out: Path, file: Path) -> None:
-    from farsighter.plots import read_csv
-    from farsighter.studies.runner import band, figure, finish_axes
+    from farsighter.plots import band, figure, finish_axes, read_csv
 
     envs = list(dict.fromkeys(t.env for t in spec.trials))
     with figure(file, 1, len(envs), figsize=(5 * len(envs), 3.6), squeeze=False) as (_, axes):
@@ -335,7 +334,7 @@ def _report(
     how: str,
     run: dict[str, Any] | None,
 ) -> None:
-    from farsighter.studies.runner import markdown_table
+    from farsighter.plots import markdown_table
 
     restarts = sum(max(r["attempts"] - 1, 0) for r in rows)
     lines = [
