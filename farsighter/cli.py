@@ -178,20 +178,46 @@ def cmd_plot(argv: Sequence[str]) -> int:
 @dataclass(frozen=True)
 class PresetsArgs:
     """List the named presets with their sources, then every algorithm with the values that
-    define it. A config is built as: field defaults <- preset <- algorithm <- your flags (a
-    preset made for one algorithm, such as bdqn, comes after that algorithm's values)."""
+    define it; with --algo, the values a run of that algorithm gets instead, each with where it
+    comes from. A config is built in five layers: field defaults <- preset <- algorithm <- the
+    preset's values for that algorithm <- your flags (a preset made for one algorithm, such as
+    bdqn, comes after that algorithm's values)."""
+
+    algo: str = ""
+    """Show the values a run of this algorithm gets (with --env and --preset), and their source."""
+    env: str = "CartPole-v1"
+    """The environment id of --algo's run (auto picks the preset from it)."""
+    preset: str = "auto"
+    """The preset of --algo's run."""
+    all: bool = False
+    """With --algo: also the fields left at their defaults."""
 
 
 def cmd_presets(argv: Sequence[str]) -> int:
     from farsighter import algorithms
-    from farsighter.config import PRESETS
+    from farsighter.config import PRESETS, explain_config, resolve_preset_name
 
-    tyro.cli(PresetsArgs, args=list(argv), prog="farsighter presets")
+    args = tyro.cli(PresetsArgs, args=list(argv), prog="farsighter presets")
+    if args.algo:
+        rows = explain_config(args.algo, args.env, args.preset)
+        name = resolve_preset_name(args.preset, args.env, args.algo)
+        print(f"--algo {args.algo} --env {args.env} --preset {args.preset} (resolves to {name}):")
+        width = max(len(key) for key, _, _ in rows)
+        for key, value, source in rows:
+            if args.all or source != "field default":
+                print(f"  {key:<{width}} = {value!r:<24} ({source})")
+        if not args.all:
+            print("  (every other field at its default: --all lists them)")
+        return 0
     for p in PRESETS.values():
         only = f" (for --algo {p.algo} only; applied over its values)" if p.algo else ""
         print(f"{p.name}{only}: {p.doc}\n  source: {p.source}")
         for key, value in p.values.items():
             print(f"    {key} = {value!r}")
+        for algo, values in p.per_algo.items():
+            print(f"    for --algo {algo} (over its values):")
+            for key, value in values.items():
+                print(f"      {key} = {value!r}")
     print("\nalgorithms (their values apply after a preset; your flags still override them):")
     for algo in algorithms.TABLE:
         print(f"{algo.name} [{algo.actions} actions]: {algo.summary}")

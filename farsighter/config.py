@@ -791,15 +791,11 @@ def resolve_preset_name(preset: str, env: str, algo: str = "") -> str:
     return preset
 
 
-def make_config(
-    algo: str = "ddqn", env: str = "CartPole-v1", preset: str = "auto", **overrides: Any
-) -> Config:
-    """Build a config: field defaults <- preset <- the algorithm's values (a preset made for the
-    algorithm comes after them) <- the preset's values for this algorithm <- ``overrides``.
-
-    ``overrides`` use field names; nested fields are written ``blr__prior_std`` or passed in a
-    dict as ``{"blr.prior_std": ...}`` via ``**{"blr.prior_std": 0.1}``.
-    """
+def config_layers(algo: str, env: str, preset: str = "auto") -> list[tuple[str, dict[str, Any]]]:
+    """The layers a config is built from, in the order they apply, each with its name: the
+    preset, the algorithm's defining values (a preset made for the algorithm comes after them),
+    then the preset's values for this algorithm. Field defaults come before them all and the
+    caller's overrides after."""
     spec = algorithms.get(algo)
     name = resolve_preset_name(preset, env, algo)
     chosen = PRESETS[name]
@@ -809,14 +805,53 @@ def make_config(
             f"accepted presets for {algo}: auto, "
             + ", ".join(p.name for p in PRESETS.values() if p.algo in ("", algo))
         )
-    layers = [spec.defaults, chosen.values] if chosen.algo else [chosen.values, spec.defaults]
-    layers.append(chosen.per_algo.get(algo, {}))
+    preset_layer = (f"preset {name}", dict(chosen.values))
+    algo_layer = (f"algorithm {algo}", dict(spec.defaults))
+    layers = [algo_layer, preset_layer] if chosen.algo else [preset_layer, algo_layer]
+    if algo in chosen.per_algo:
+        layers.append((f"preset {name}, for {algo}", dict(chosen.per_algo[algo])))
+    return layers
+
+
+def make_config(
+    algo: str = "ddqn", env: str = "CartPole-v1", preset: str = "auto", **overrides: Any
+) -> Config:
+    """Build a config: field defaults <- :func:`config_layers` (preset, algorithm, the preset's
+    values for this algorithm) <- ``overrides``.
+
+    ``overrides`` use field names; nested fields are written ``blr__prior_std`` or passed in a
+    dict as ``{"blr.prior_std": ...}`` via ``**{"blr.prior_std": 0.1}``.
+    """
     values: dict[str, Any] = {}
-    for layer in layers:
+    for _, layer in config_layers(algo, env, preset):
         values.update(layer)
     values.update({k.replace("__", "."): v for k, v in overrides.items()})
-    values.update({"algo": algo, "env": env, "preset": name})
+    values.update({"algo": algo, "env": env, "preset": resolve_preset_name(preset, env, algo)})
     return _nested_replace(Config(), values)
+
+
+def explain_config(algo: str, env: str, preset: str = "auto") -> list[tuple[str, Any, str]]:
+    """(dotted field, value, where the value comes from) for every field of the config that
+    ``make_config(algo, env, preset)`` builds, in field order: a layer's name, or ``field
+    default``."""
+    source: dict[str, str] = {}
+    for name, layer in config_layers(algo, env, preset):
+        for key in layer:
+            source[key] = name
+    cfg = make_config(algo, env, preset)
+    rows: list[tuple[str, Any, str]] = []
+
+    def walk(obj: Any, prefix: str) -> None:
+        for f in dataclasses.fields(obj):
+            value = getattr(obj, f.name)
+            if dataclasses.is_dataclass(value):
+                walk(value, f"{prefix}{f.name}.")
+            else:
+                key = prefix + f.name
+                rows.append((key, value, source.get(key, "field default")))
+
+    walk(cfg, "")
+    return rows
 
 
 def validate(cfg: Config) -> None:

@@ -110,3 +110,44 @@ def test_presets_command_lists_every_preset_and_algorithm(
         assert f"\n{name}" in f"\n{out}"
     for spec in algorithms.TABLE:
         assert f"\n{spec.name} [{spec.actions} actions]" in out
+
+
+def test_explained_values_are_the_values_a_run_gets_for_every_preset_and_algorithm() -> None:
+    """explain_config (what `farsighter presets --algo X` prints) gives, for every (preset,
+    algorithm) pair a config can be built for, exactly the fields of make_config's config, each
+    attributed to the last layer that set it."""
+    from farsighter.config import config_layers, explain_config
+
+    checked = 0
+    for preset in ["auto", *PRESETS]:
+        for spec in algorithms.TABLE:
+            env = "Pendulum-v1" if spec.actions == "continuous" else "CartPole-v1"
+            try:
+                cfg = make_config(spec.name, env, preset=preset)
+            except ConfigError:  # a preset made for another algorithm
+                continue
+            layers = config_layers(spec.name, env, preset)
+            for key, value, source in explain_config(spec.name, env, preset):
+                obj = cfg
+                for part in key.split("."):
+                    obj = getattr(obj, part)
+                assert obj == value, (preset, spec.name, key)
+                setters = [name for name, layer in layers if key in layer]
+                assert source == (setters[-1] if setters else "field default")
+            checked += 1
+    assert checked >= 2 * len(algorithms.TABLE)
+
+
+def test_presets_with_algo_prints_the_resolved_values_and_their_source(
+    capsys: pytest.CaptureFixture[str],
+) -> None:
+    assert main(["presets", "--algo", "farsighter"]) == 0
+    out = capsys.readouterr().out
+    assert "resolves to general" in out
+    lines = {line.split("=")[0].strip(): line for line in out.splitlines() if "=" in line}
+    assert "'max'" in lines["k_target"] and "(preset general, for farsighter)" in lines["k_target"]
+    assert "'step'" in lines["blr.redraw"] and "(algorithm farsighter)" in lines["blr.redraw"]
+    assert "eval_max_steps" not in lines  # left at its default: only with --all
+    assert main(["presets", "--algo", "bdqn", "--preset", "bdqn", "--all"]) == 0
+    out = capsys.readouterr().out
+    assert "blr.redraw" in out and "(preset bdqn)" in out and "(field default)" in out
