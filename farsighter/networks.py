@@ -16,6 +16,7 @@ import gymnasium as gym
 import numpy as np
 import torch
 from torch import nn
+from torch.nn import functional as F
 
 Precision = Literal["fp32", "bf16"]
 
@@ -71,12 +72,17 @@ class MLPTorso(Torso):
             last = size
         self.net = nn.Sequential(*layers)
         self.out_dim = last
+        self._linears = [m for m in layers if isinstance(m, nn.Linear)]
 
     def prepare(self, obs_BO: torch.Tensor) -> torch.Tensor:
         return obs_BO.float().flatten(1)
 
     def body(self, x: torch.Tensor) -> torch.Tensor:
-        return self.net(x)
+        # ``self.net``'s layers called as functions: the same operations, without a module call
+        # per layer (a tenth of a millisecond per forward of a small net, paid at every step).
+        for layer in self._linears:
+            x = torch.relu(F.linear(x, layer.weight, layer.bias))
+        return x
 
 
 class NatureCNN(Torso):

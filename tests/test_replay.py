@@ -203,3 +203,20 @@ def test_checkpoint_round_trip_samples_identically() -> None:
     )
     x, y = a.sample(16, k=3, gamma=G), b.sample(16, k=3, gamma=G)
     assert np.array_equal(x.index, y.index) and np.array_equal(x.returns, y.returns)
+
+
+@pytest.mark.parametrize("span", [[7], [3, 0, 5], [0, 4], [2, 2, 2, 9]])
+def test_row_draws_are_generator_choice_without_its_checks(span: list[int]) -> None:
+    """The sampler draws streams as Generator.choice(p=span / total) does, draw for draw, so
+    replacing choice changed no minibatch (and no trained weight): streams and rows equal, and
+    the generators end in the same state."""
+    span_E = np.array(span, dtype=np.int64)
+    low_E = np.arange(len(span), dtype=np.int64) * 100
+    ours, ref = np.random.default_rng(11), np.random.default_rng(11)
+    e_N, l_N = ReplayBuffer._draw_rows(low_E, span_E, 500, ours)
+    e_ref = ref.choice(len(span), size=500, p=span_E / span_E.sum())
+    l_ref = low_E[e_ref] + (ref.random(500) * span_E[e_ref]).astype(np.int64)
+    np.testing.assert_array_equal(e_N, e_ref)
+    np.testing.assert_array_equal(l_N, l_ref)
+    assert e_N.dtype == np.int64 and ours.random() == ref.random()
+    assert set(e_N.tolist()) == {i for i, s in enumerate(span) if s > 0}  # empty streams never

@@ -208,7 +208,8 @@ class NAFAgent:
                 [
                     {"params": [layer.weight_mu, layer.bias_mu], "lr": n.elbo_lr},
                     {"params": [layer.weight_rho, layer.bias_rho], "lr": n.elbo_rho_lr},
-                ]
+                ],
+                foreach=True,  # as make_optimizer: the same arithmetic in one call
             )
         self.replay = make_replay(
             cfg, obs_space, frame_stack, seed=cfg.seed + 1, act_space=act_space

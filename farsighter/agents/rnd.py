@@ -106,7 +106,7 @@ class RNDAgent:
         self.predictor = build_seeded(
             cfg.seed + 5, lambda: RNDNetwork(obs_space, cfg.hidden_sizes, r.feature_dim, 2)
         ).to(device)
-        self.rnd_opt = torch.optim.Adam(self.predictor.parameters(), lr=r.lr)
+        self.rnd_opt = torch.optim.Adam(self.predictor.parameters(), lr=r.lr, foreach=True)
         shape = obs_space.shape
         assert shape is not None
         self.whiten = r.normalize_obs and len(shape) == 1

@@ -417,9 +417,19 @@ class ReplayBuffer:
     ) -> tuple[np.ndarray, np.ndarray]:
         """n (stream, logical index) pairs, uniform over the rows [low_E, low_E + span_E) of
         every stream (streams weighted by their span), with replacement."""
-        e_N = rng.choice(len(low_E), size=n, p=span_E / span_E.sum())
+        # Generator.choice(len(low_E), size=n, p=...)'s own method, with the same draws, less
+        # its checks of p (tens of microseconds an update): a uniform per row, then the stream
+        # whose cumulative weight it falls under.
+        p_E = span_E / span_E.sum()
+        u_N = rng.random(n)
+        if len(p_E) == 1:
+            e_N = np.zeros(n, dtype=np.int64)
+        else:
+            cdf_E = p_E.cumsum()
+            cdf_E /= cdf_E[-1]
+            e_N = cdf_E.searchsorted(u_N, side="right").astype(np.int64)
         l_N = low_E[e_N] + (rng.random(n) * span_E[e_N]).astype(np.int64)
-        return e_N.astype(np.int64), l_N
+        return e_N, l_N
 
     def sample_indices(
         self,
