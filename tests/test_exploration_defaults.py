@@ -90,6 +90,10 @@ def test_q_noise_has_the_predictive_variance() -> None:
     noise = head.q_noise(x, generator=torch.Generator().manual_seed(0))
     assert torch.allclose(noise.var(0), head.predictive_var(x[:1])[0], rtol=0.05)
     assert noise.mean(0).abs().max() < 0.05
+    # normal, as phi^T U_a z is: 68.3% within one sd, kurtosis 3
+    std = (noise / head.predictive_var(x[:1])[0].sqrt()).double()
+    assert abs((std.abs() < 1).double().mean().item() - 0.6827) < 0.015
+    assert abs(std.pow(4).mean().item() - 3.0) < 0.2
 
 
 # ------------------------------------------------------------------ the agent

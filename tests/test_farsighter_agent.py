@@ -132,3 +132,23 @@ def test_incremental_mode_accumulates_update_minibatches(tmp_path: Path) -> None
     y_stats = agent.head.phiy_AD.clone()
     agent.refresh_posterior()
     assert torch.equal(agent.head.phiy_AD, y_stats)  # a refresh alone adds nothing
+
+
+def test_recent_rows_keep_the_latest_rows_in_order() -> None:
+    """The ring buffer of incremental mode's recent features holds what concatenating and
+    keeping the last rows held, after adds of every size (larger than it too), and round-trips
+    through its saved form."""
+    from farsighter.agents.common import RecentRows
+
+    gen = torch.Generator().manual_seed(0)
+    ring, reference = RecentRows(10), None
+    assert ring.rows() is None and ring.state_dict() is None
+    for n in [3, 4, 1, 7, 10, 25, 2, 9, 9, 11]:
+        rows = torch.randn(n, 2, generator=gen)
+        ring.add(rows)
+        reference = rows if reference is None else torch.cat([reference, rows])
+        reference = reference[-10:]
+        assert torch.equal(ring.rows(), reference)
+        copy = RecentRows(10)
+        copy.load_state_dict(ring.state_dict())
+        assert torch.equal(copy.rows(), reference)

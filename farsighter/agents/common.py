@@ -218,6 +218,51 @@ def sample_minibatch(replay: ReplayBuffer, cfg: Config, batch_size: int, k: int)
     )
 
 
+class RecentRows:
+    """The latest ``keep`` rows added, oldest first: a ring buffer, so that adding a minibatch
+    copies the minibatch only (keeping them by concatenation copied all ``keep`` rows per add).
+    Saved as the ordered rows (or None), so checkpoints hold what they held before."""
+
+    def __init__(self, keep: int) -> None:
+        if keep < 1:
+            raise ValueError(f"keep must be >= 1, got {keep}")
+        self.keep = int(keep)
+        self.buf: torch.Tensor | None = None
+        self.added = 0  # rows added in all
+
+    def add(self, rows_ND: torch.Tensor) -> None:
+        rows_ND = rows_ND[-self.keep :]
+        n = rows_ND.shape[0]
+        if n == 0:
+            return
+        if self.buf is None:
+            shape = (self.keep, *rows_ND.shape[1:])
+            self.buf = torch.empty(shape, dtype=rows_ND.dtype, device=rows_ND.device)
+        at = self.added % self.keep
+        first = min(n, self.keep - at)
+        self.buf[at : at + first] = rows_ND[:first]
+        self.buf[: n - first] = rows_ND[first:]
+        self.added += n
+
+    def rows(self) -> torch.Tensor | None:
+        """The rows kept, oldest first (None before any was added)."""
+        if self.buf is None or self.added == 0:
+            return None
+        if self.added < self.keep:
+            return self.buf[: self.added]
+        at = self.added % self.keep
+        return torch.cat([self.buf[at:], self.buf[:at]]) if at else self.buf
+
+    def state_dict(self) -> torch.Tensor | None:
+        rows = self.rows()
+        return None if rows is None else rows.clone()
+
+    def load_state_dict(self, rows_ND: torch.Tensor | None) -> None:
+        self.buf, self.added = None, 0
+        if rows_ND is not None:
+            self.add(rows_ND)
+
+
 @dataclass
 class Counters:
     """What an agent counts, checkpointed as a whole (:func:`save_state`): a field added here is

@@ -38,6 +38,7 @@ from torch import nn
 
 from farsighter.agents.common import (
     Counters,
+    RecentRows,
     TensorBatch,
     adapt_k,
     batch_tensors,
@@ -72,6 +73,7 @@ from farsighter.replay import Batch, VectorStep
 from farsighter.replay.target_cache import TargetCache, target_cache_rows
 
 FEATURE_CHUNK = 4_096  # rows per forward pass when computing features for a posterior refresh
+RECENT_FEATURES = 2_048  # incremental mode: minibatch features kept for adaptive k's Q-variance
 
 
 @dataclass
@@ -146,7 +148,7 @@ class FarsighterAgent:
 
         self.counters = FarsighterCounters(k=cfg.k)
         # Incremental mode: recent minibatch features, for the Q-variance of adaptive k.
-        self.recent_phi: torch.Tensor | None = None
+        self.recent_phi = RecentRows(RECENT_FEATURES)
         # Per-environment weight draws for redraw = k / every / episode.
         self.w_EAD: torch.Tensor | None = None
         self.redraw_E = np.ones(cfg.num_envs, dtype=bool)
@@ -253,14 +255,14 @@ class FarsighterAgent:
         self,
         t: TensorBatch,
         w_online_AD: torch.Tensor | None = None,
-        z_BAD: torch.Tensor | None = None,
+        z_BA: torch.Tensor | None = None,
         phi_next_target: torch.Tensor | None = None,
     ) -> torch.Tensor:
         """y = r^k + gamma^k phi_target(s')^T mean_target[a*] (Eq. 8 with k-step returns).
 
         a* is the argmax under the online features and the posterior mean (Eq. 8), or under the
         latest acting Thompson draw when ``blr.target = thompson`` (the BDQN authors' code).
-        ``w_online_AD`` (that draw) and ``z_BAD`` (the normals of ``blr.target = sample``) are
+        ``w_online_AD`` (that draw) and ``z_BA`` (the normals of ``blr.target = sample``) are
         drawn here unless given (:meth:`_draws`, for the captured update); ``phi_next_target``
         (the target features of s', from the target cache) likewise."""
         if phi_next_target is None:
@@ -275,7 +277,7 @@ class FarsighterAgent:
         q_next_online = phi_next @ w_online_AD.T
         q_next_target = phi_next_target @ self.target_mean_AD.T
         if self.cfg.blr.target == "sample":
-            noise_BA = self.head.q_noise(phi_next_target, generator=self.gen, z_BAD=z_BAD)
+            noise_BA = self.head.q_noise(phi_next_target, generator=self.gen, z_BA=z_BA)
             q_next_online = q_next_online + noise_BA
             q_next_target = q_next_target + noise_BA
         return double_q_target(t.returns_B, t.bootstrap_B, q_next_online, q_next_target)
@@ -338,9 +340,9 @@ class FarsighterAgent:
             return {"w_online_AD": self._acting_draw()}
         if target != "sample":
             return {}
-        draws = {"z_BAD": self.head.noise_z(rows, self.gen)}
+        draws = {"z_BA": self.head.noise_z(rows, self.gen)}
         if one_step:
-            draws["one_z_BAD"] = self.head.noise_z(rows, self.gen)
+            draws["one_z_BA"] = self.head.noise_z(rows, self.gen)
         return draws
 
     def _step(self, inputs: Tensors) -> Tensors:
@@ -348,7 +350,7 @@ class FarsighterAgent:
         target, the loss at the posterior mean, and the optimizer step on theta."""
         t = TensorBatch.of(inputs)
         w = inputs.get("w_online_AD")
-        y_B = self._targets(t, w, inputs.get("z_BAD"), inputs.get("phi_next_target_BD"))
+        y_B = self._targets(t, w, inputs.get("z_BA"), inputs.get("phi_next_target_BD"))
         if "one_next_obs_B" in inputs:  # k_target = max
             one = TensorBatch(
                 obs_B=t.obs_B,
@@ -359,9 +361,7 @@ class FarsighterAgent:
             )
             y_B = torch.maximum(
                 y_B,
-                self._targets(
-                    one, w, inputs.get("one_z_BAD"), inputs.get("one_phi_next_target_BD")
-                ),
+                self._targets(one, w, inputs.get("one_z_BA"), inputs.get("one_phi_next_target_BD")),
             )
         phi_BD = self.torso(t.obs_B)
         q_B = (phi_BD @ self.head.mean_AD.T).gather(1, t.actions_B[:, None])[:, 0]
@@ -379,9 +379,7 @@ class FarsighterAgent:
         (scaling phi and y by sqrt(w) scales Phi Phi^T and Phi y by w)."""
         root_w = (self.cfg.train_every / self.cfg.batch_size) ** 0.5
         self.head.accumulate(phi_BD * root_w, a_B, y_B * root_w)
-        keep = 2_048
-        rows = phi_BD if self.recent_phi is None else torch.cat([self.recent_phi, phi_BD])
-        self.recent_phi = rows[-keep:]
+        self.recent_phi.add(phi_BD)
 
     @torch.no_grad()
     def _features_and_targets(
@@ -424,10 +422,11 @@ class FarsighterAgent:
                 return
             self.head.fit(phi_ND, a_N, y_N)  # statistics reset each refresh, as in BDQN's code
         else:  # the statistics are already up to date: no features are recomputed
-            if self.recent_phi is None:
+            recent = self.recent_phi.rows()
+            if recent is None:
                 return
             self.head.refresh()
-            phi_ND = self.recent_phi
+            phi_ND = recent
         self.counters.q_variance = greedy_predictive_variance(self.head, phi_ND)
         adapt_k(self.counters, self.counters.q_variance, cfg.adaptive_k, self.replay)
 
