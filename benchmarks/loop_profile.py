@@ -98,6 +98,7 @@ def phase_timers(algo: str, timer: PhaseTimer) -> Iterator[None]:
 
     from farsighter import algorithms
     from farsighter.envs.envpool_vec import EnvpoolAtariVector
+    from farsighter.envs.vector import LeanSyncVectorEnv
 
     cls = importlib.import_module(f"farsighter.agents.{algorithms.get(algo).agent}").AGENT
     patched: list[tuple[Any, str, Any]] = []
@@ -105,7 +106,7 @@ def phase_timers(algo: str, timer: PhaseTimer) -> Iterator[None]:
         patched.append((cls, name, getattr(cls, name)))
         setattr(cls, name, timer.wrap(f"agent.{name}", getattr(cls, name)))
     steps = [(EnvpoolAtariVector, n) for n in ("step", "step_async", "step_wait")]
-    for owner, name in [*steps, (gym.vector.SyncVectorEnv, "step")]:
+    for owner, name in [*steps, (gym.vector.SyncVectorEnv, "step"), (LeanSyncVectorEnv, "step")]:
         patched.append((owner, name, getattr(owner, name)))
         setattr(owner, name, timer.wrap("env.step", getattr(owner, name)))
     make_pool = EnvpoolAtariVector._make_pool

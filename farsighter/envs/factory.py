@@ -20,6 +20,7 @@ from farsighter.config import Config, is_atari_id
 from farsighter.envs.chain import register_chain
 from farsighter.envs.deep_sea import register_deep_sea
 from farsighter.envs.minatar import MinAtarChannelsFirst, is_minatar_id, register_minatar
+from farsighter.envs.vector import LeanSyncVectorEnv
 from farsighter.errors import EnvError
 
 # Ids registered by gymnasium-robotics (imported lazily: it is an optional extra).
@@ -195,7 +196,7 @@ def make_vector_env(cfg: Config, *, seed: int) -> gym.vector.VectorEnv:
             max_episode_steps=a.max_frames_per_episode // a.frame_skip or 2**31 - 1,
             num_threads=a.envpool_threads,
         )
-    return gym.vector.SyncVectorEnv(
+    return LeanSyncVectorEnv(
         # partials (not lambdas) keep the vector env picklable, so checkpoints can hold it.
         [partial(make_env, cfg, seed=seed + i, training=True) for i in range(cfg.num_envs)],
         autoreset_mode=gym.vector.AutoresetMode.SAME_STEP,
