@@ -17,6 +17,7 @@ from farsighter.agents.common import (
     build_seeded,
     clip_and_step,
     epsilon_greedy,
+    greedy_actions,
     linear_schedule,
     load_state,
     make_optimizer,
@@ -84,10 +85,8 @@ class DDQNAgent:
             self.rng, self.epsilon, self.num_actions, lambda: self.greedy(obs_E), obs_E.shape[0]
         )
 
-    @torch.no_grad()
     def greedy(self, obs_E: np.ndarray) -> np.ndarray:
-        q_EA = self.q(obs_tensor(obs_E, self.device))
-        return q_EA.argmax(dim=1).cpu().numpy()
+        return greedy_actions(self.q, obs_E, self.device)
 
     @torch.no_grad()
     def q_estimate(self, obs_B: np.ndarray) -> tuple[np.ndarray, np.ndarray | None]:

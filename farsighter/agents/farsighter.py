@@ -76,6 +76,12 @@ FEATURE_CHUNK = 4_096  # rows per forward pass when computing features for a pos
 RECENT_FEATURES = 2_048  # incremental mode: minibatch features kept for adaptive k's Q-variance
 
 
+def _q_under(phi_ED: torch.Tensor, w_EAD: torch.Tensor) -> torch.Tensor:
+    """Q(s_e, a) = phi(s_e)^T w_ea under each environment's own weight draw, shape (E, A): one
+    batched matrix-vector product (what einsum "ed,ead->ea" computes, without its parsing)."""
+    return torch.bmm(w_EAD, phi_ED.unsqueeze(2)).squeeze(2)
+
+
 @dataclass
 class FarsighterCounters(Counters):
     refreshes: int = 0  # posterior refreshes made (every M steps)
@@ -180,7 +186,7 @@ class FarsighterAgent:
             w_EAD = self.draws.take(n, self.gen)
             if blr.target == "thompson":
                 self.w_EAD = w_EAD.clone()  # not a view: the block is replaced, w_EAD saved
-            return torch.einsum("ed,ead->ea", phi_ED, w_EAD)
+            return _q_under(phi_ED, w_EAD)
         # Held draws.
         if blr.redraw in ("every", "k"):
             hold = blr.redraw_every if blr.redraw == "every" else c.k
@@ -197,7 +203,7 @@ class FarsighterAgent:
             self.w_EAD[idx] = self.head.sample_weights(len(idx), generator=self.gen)
             c.draws += len(idx)
             self.redraw_E[:] = False
-        return torch.einsum("ed,ead->ea", phi_ED, self.w_EAD)
+        return _q_under(phi_ED, self.w_EAD)
 
     def _acting_draw(self) -> torch.Tensor:
         """The weights (A, D) of the latest acting draw (environment 0), for blr.target = thompson:

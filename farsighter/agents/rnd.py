@@ -35,6 +35,7 @@ from farsighter.agents.common import (
     build_seeded,
     clip_and_step,
     epsilon_greedy,
+    greedy_actions,
     linear_schedule,
     load_state,
     make_optimizer,
@@ -129,9 +130,8 @@ class RNDAgent:
             self.rng, self.epsilon, self.num_actions, lambda: self.greedy(obs_E), obs_E.shape[0]
         )
 
-    @torch.no_grad()
     def greedy(self, obs_E: np.ndarray) -> np.ndarray:
-        return self.q(obs_tensor(obs_E, self.device)).argmax(dim=1).cpu().numpy()
+        return greedy_actions(self.q, obs_E, self.device)
 
     @torch.no_grad()
     def q_estimate(self, obs_B: np.ndarray) -> tuple[np.ndarray, np.ndarray | None]:
