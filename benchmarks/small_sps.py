@@ -11,11 +11,13 @@ bar); what it does not (evaluations inside the window) is off.
 
 The figure is the training phase's steps/s: for CleanRL, 100 steps per ``SPS:`` line over the time
 between its first and last line (our clock, timestamped as they arrive; the lines come every 100
-steps after ``learning_starts``); for ours, the steps between the first step at or after
-``learning_starts`` and the last step over the wall time between them (a loop callback). Each
-round runs every entry once in turn, so the ratios are taken side by side.
+steps after ``learning_starts``); for ours, the run's own ``train_phase_sps`` (summary.json: from
+the first step at or after ``learning_starts`` to the last step, before the final evaluation) of
+a ``farsighter train`` process with those settings as flags. Each round runs every entry once in
+turn, so the ratios are taken side by side. ``--baseline DIR`` also measures the package of
+another checkout (a git worktree of an older commit) the same way, for before/after ratios.
 
-    python -m benchmarks.small_sps --cleanrl DIR [--algos ddqn farsighter] [--rounds 2]
+    python -m benchmarks.small_sps --cleanrl DIR [--baseline DIR] [--algos ddqn farsighter] [--rounds 2]
 
 ``--cleanrl DIR``: a CleanRL checkout holding ``cleanrl/dqn.py`` and ``cleanrl_utils/``, run
 unmodified through :func:`benchmarks.atari_sps.cleanrl_launch` (Gymnasium 1.x adapted to the 0.29
@@ -30,17 +32,13 @@ import os
 import statistics
 import sys
 import tempfile
-import time
 from pathlib import Path
 from typing import Any
-
-import torch
 
 from benchmarks.atari_sps import child_env, fail, run_child
 from benchmarks.common import REPO, write_result
 
 ENV = "CartPole-v1"
-RESULT_TAG = "SMALL_SPS_RESULT "
 SPS_EVERY = 100  # dqn.py prints SPS when global_step % 100 == 0 (past learning_starts)
 # CleanRL dqn.py's defaults (its Args), in our field names; the length is set per run.
 CLEANRL_DQN = {
@@ -61,78 +59,47 @@ CLEANRL_DQN = {
 GOALS = {"ddqn": 1.2, "farsighter": 1.0}  # issue #27: ours / CleanRL, one seed
 
 
-class Window:
-    """Loop callback: wall time and step at the first step >= ``start`` and at the last one."""
+def train_command(spec: dict[str, Any], run_dir: str) -> list[str]:
+    """``farsighter train`` with CleanRL dqn.py's settings (what a user would type)."""
+    flags: dict[str, Any] = {
+        **CLEANRL_DQN,
+        "algo": spec["algo"],
+        "env": ENV,
+        "seed": spec["seed"],
+        "total_steps": spec["steps"],
+        "learning_starts": spec["learning_starts"],
+        "eps_decay_steps": spec["steps"] // 2,  # dqn.py: exploration_fraction 0.5
+        "torch_threads": spec["threads"],
+        "device": "cpu",
+        "eval_every": 0,  # dqn.py evaluates nothing; one final episode, outside the window
+        "eval_episodes": 1,
+        "run_dir": run_dir,
+    }
+    cmd = ["-m", "farsighter", "train"]
+    for key, value in flags.items():
+        values = value if isinstance(value, tuple) else (value,)
+        cmd += [f"--{key.replace('_', '-')}", *(str(v) for v in values)]
+    return cmd + ["--no-progress"]
 
-    def __init__(self, start: int) -> None:
-        self.start = start
-        self.first: tuple[int, float] | None = None
-        self.last: tuple[int, float] | None = None
 
-    def on_step(self, global_step: int, info: dict[str, Any], agent: Any) -> None:
-        now = time.perf_counter()
-        if self.first is None:
-            if global_step >= self.start:
-                self.first = (global_step, now)
-            return
-        self.last = (global_step, now)
-
-    def on_finish(self, run_dir: Path, agent: Any) -> None:
-        pass
-
-
-def run_one(spec: dict[str, Any]) -> dict[str, Any]:
-    """One run of ours (in this process); the training phase's figures."""
-    from farsighter import make_config, train
-
-    torch.set_num_threads(spec["threads"])
+def measure_ours(spec: dict[str, Any], checkout: Path) -> dict[str, Any]:
+    """One ``farsighter train`` run of the package in ``checkout``, in its own process; the
+    training phase's steps/s is the run's own ``train_phase_sps`` (summary.json: from the first
+    step at or after learning_starts to the last step, before the final evaluation)."""
     with tempfile.TemporaryDirectory() as tmp:
-        cfg = make_config(
-            spec["algo"],
-            ENV,
-            seed=spec["seed"],
-            total_steps=spec["steps"],
-            learning_starts=spec["learning_starts"],
-            eps_decay_steps=spec["steps"] // 2,  # dqn.py: exploration_fraction 0.5
-            torch_threads=spec["threads"],
-            device="cpu",
-            eval_every=0,
-            eval_episodes=1,
-            run_dir=f"{tmp}/run",
-            **CLEANRL_DQN,  # type: ignore[arg-type]
-        )
-        window = Window(spec["learning_starts"])
-        train(cfg, callbacks=[window])
-    assert window.first is not None and window.last is not None
-    steps = window.last[0] - window.first[0]
-    wall = window.last[1] - window.first[1]
+        cmd = [sys.executable, *train_command(spec, f"{tmp}/run")]
+        env = {**child_env(spec["threads"]), "PYTHONPATH": str(checkout)}
+        rc, lines, _ = run_child(cmd, tmp, env)
+        if rc != 0:
+            fail(f"farsighter train --algo {spec['algo']} ({checkout})", rc, lines)
+        summary = json.loads(Path(f"{tmp}/run/summary.json").read_text())
     return {
         "algo": spec["algo"],
-        "measured_steps": steps,
-        "window_seconds": round(wall, 3),
-        "sps": round(steps / wall, 1),
-        "config": {
-            "preset": cfg.preset,
-            "k": cfg.k,
-            "k_target": cfg.k_target,
-            "blr_mode": cfg.blr.mode,
-            "blr_redraw": cfg.blr.redraw,
-            "blr_target": cfg.blr.target,
-            "blr_posterior_every": cfg.blr.posterior_every,
-            "sample_recent": cfg.sample_recent,
-            "checkpoint_every": cfg.checkpoint_every,
-            "log_every": cfg.log_every,
-        },
+        "checkout": str(checkout),
+        "sps": round(summary["train_phase_sps"], 1),
+        "library_overall_sps": round(summary["sps"], 1),
+        "command": " ".join(["python", *train_command(spec, "RUN_DIR")]),
     }
-
-
-def measure_ours(spec: dict[str, Any]) -> dict[str, Any]:
-    cmd = [sys.executable, "-m", "benchmarks.small_sps", "--one", json.dumps(spec)]
-    rc, lines, _ = run_child(cmd, REPO, child_env(spec["threads"]))
-    results = [text[len(RESULT_TAG) :] for _, text in lines if text.startswith(RESULT_TAG)]
-    if rc != 0 or not results:
-        fail(f"farsighter train --algo {spec['algo']}", rc, lines)
-    return json.loads(results[-1])
 
 
 def measure_cleanrl(root: Path, spec: dict[str, Any]) -> dict[str, Any]:
@@ -176,12 +143,16 @@ def main() -> None:
     p.add_argument("--learning-starts", type=int, default=10_000)
     p.add_argument("--threads", type=int, default=1)
     p.add_argument("--seed", type=int, default=1)
+    p.add_argument(
+        "--baseline",
+        type=Path,
+        help="another checkout of this repository (e.g. a git worktree of an older commit): its "
+        "package is measured beside this one, each algorithm as <algo>@baseline",
+    )
     p.add_argument("--name", default="small_sps")
-    p.add_argument("--one", help=argparse.SUPPRESS)  # internal: one run of ours, JSON spec
     args = p.parse_args()
-    if args.one is not None:
-        print(RESULT_TAG + json.dumps(run_one(json.loads(args.one))), flush=True)
-        return
+    if args.baseline is not None and not (args.baseline / "farsighter" / "train.py").is_file():
+        raise SystemExit(f"--baseline {args.baseline}: no farsighter package there")
     if args.learning_starts + 2 * SPS_EVERY > args.steps:
         raise SystemExit("--steps must exceed --learning-starts by at least 200")
     base = {
@@ -191,6 +162,8 @@ def main() -> None:
         "threads": args.threads,
     }
     entries = (["cleanrl_dqn"] if args.cleanrl else []) + list(args.algos)
+    if args.baseline is not None:
+        entries += [f"{a}@baseline" for a in args.algos]
     rows: dict[str, list[dict[str, Any]]] = {name: [] for name in entries}
     load_before = os.getloadavg()[0]
     for rnd in range(args.rounds):
@@ -199,7 +172,9 @@ def main() -> None:
             if name == "cleanrl_dqn":
                 row = measure_cleanrl(args.cleanrl, base)
             else:
-                row = measure_ours({**base, "algo": name})
+                algo, _, which = name.partition("@")
+                checkout = args.baseline if which else REPO
+                row = measure_ours({**base, "algo": algo}, checkout)
             rows[name].append({**row, "round": rnd + 1})
             print(f"  {row['sps']} steps/s", file=sys.stderr, flush=True)
     figures: dict[str, Any] = {
@@ -209,6 +184,15 @@ def main() -> None:
         "runs": rows,
         "median_sps": {n: statistics.median(r["sps"] for r in rs) for n, rs in rows.items()},
     }
+    if args.baseline is not None:
+        figures["baseline"] = str(args.baseline)
+        figures["ratio_to_baseline_per_round"] = {
+            a: [
+                round(now["sps"] / then["sps"], 3)
+                for now, then in zip(rows[a], rows[f"{a}@baseline"], strict=True)
+            ]
+            for a in args.algos
+        }
     if args.cleanrl:
         # per round, ours over CleanRL's measured right beside it
         figures["ratio_to_cleanrl_per_round"] = {
@@ -216,7 +200,8 @@ def main() -> None:
                 round(ours["sps"] / ref["sps"], 3)
                 for ours, ref in zip(rows[n], rows["cleanrl_dqn"], strict=True)
             ]
-            for n in args.algos
+            for n in entries
+            if n != "cleanrl_dqn"
         }
         figures["goals"] = {
             n: {
