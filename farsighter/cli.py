@@ -214,8 +214,8 @@ def cmd_presets(argv: Sequence[str]) -> int:
         print(f"{p.name}{only}: {p.doc}\n  source: {p.source}")
         for key, value in p.values.items():
             print(f"    {key} = {value!r}")
-        for algo, values in p.per_algo.items():
-            print(f"    for --algo {algo} (over its values):")
+        for name, values in p.per_algo.items():
+            print(f"    for --algo {name} (over its values):")
             for key, value in values.items():
                 print(f"      {key} = {value!r}")
     print("\nalgorithms (their values apply after a preset; your flags still override them):")

@@ -1,0 +1,400 @@
+"""The fields of a run's configuration: frozen dataclasses with a docstring per field (tyro turns
+those into ``--help`` text), one per agent family beside the run's own."""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Literal
+
+
+@dataclass(frozen=True)
+class BLRConfig:
+    """Bayesian linear regression head (paper section 4.2, Eq. 7 and 9)."""
+
+    prior_std: float = 0.1
+    """sigma in Eq. 9: the prior is N(0, sigma^2 I). Paper Table 1: 0.1."""
+    noise_std: float = 1.0
+    """sigma_eps in Eq. 9: the likelihood noise is N(0, sigma_eps^2). Paper Table 1: 1."""
+    cov_scale: float = 1.0
+    """Multiplies the posterior covariance used for Thompson draws (BDQN code: the prior variance)."""
+    posterior_every: int = 10_000
+    """M: environment steps between posterior refreshes. Paper Table 1: M = 10 N."""
+    posterior_samples: int = 1_000
+    """D: most recent transitions used by a batch-mode refresh. Table 1: 1k control, 100k Atari."""
+    mode: Literal["batch", "incremental"] = "batch"
+    """batch: recompute Phi Phi^T from D tuples each refresh; incremental: running statistics."""
+    forgetting: float = 1.0
+    """Incremental mode: statistics are multiplied by this before each accumulation (1 = none)."""
+    scale: Literal["fixed", "residual"] = "fixed"
+    """fixed: sigma and sigma_eps are the constants above (the paper). residual: at every refresh
+    sigma_eps = max(noise_std, RMS residual of the regression targets under the posterior mean)
+    and sigma = sigma_eps * prior_std / noise_std, so the posterior follows the scale of the
+    values (noise_std is then a floor and prior_std / noise_std the prior's ratio to it)."""
+    redraw: Literal["step", "k", "every", "episode", "revisit"] = "step"
+    """When a fresh Thompson draw z is made, per environment: every step (Algorithm 2), held for k
+    steps (the horizon of the k-step target), every `redraw_every` steps, once per episode, or
+    revisit: held while the episode reaches new states, redrawn at its start and whenever it
+    returns to an observation it already saw (commits like a draw per episode, breaks the loops
+    a fixed greedy policy walks; farsighter.ops.revisit). Our extension, not the paper's."""
+    redraw_every: int = 1
+    """T for ``redraw=every``."""
+    target: Literal["mean", "thompson", "sample"] = "mean"
+    """Value of the next state in the Q-loss target. mean: argmax and value under the posterior
+    mean (Eq. 8). thompson: argmax under the latest acting Thompson draw, one weight set for the
+    whole minibatch (the BDQN authors' code). sample: a fresh posterior draw per target row is
+    added to both the online and the target Q of s' (argmax and value), so uncertainty about
+    the next state raises the target: optimism propagates back along the chain of bootstraps,
+    as in randomised value functions (Osband et al. 2019); our extension, not the paper's. With
+    gamma = 1 that optimism is not discounted along loops (on the bridge maze, with the general
+    posterior, Farsighter failed 2 of 2 seeds that the maze preset solves: docs/results/explore)."""
+    posterior_sampling: Literal["recent", "uniform"] = "recent"
+    """Batch-mode refresh tuples: the latest D transitions (Table 1's 'most recent'), or D starts
+    drawn uniformly from the whole buffer with replacement (the BDQN authors' code)."""
+    posterior_target: Literal["double", "max"] = "double"
+    """Regression targets of a refresh: Eq. 8's double-Q target (argmax under the online features
+    and posterior mean, value under the target network and target mean), or the plain
+    max_a phi_target(s')^T mean_target_a (the BDQN authors' code)."""
+
+
+@dataclass(frozen=True)
+class AdaptiveKConfig:
+    """Adaptive k (paper section 4.5, Algorithm 1 line 7)."""
+
+    enabled: bool = False
+    """Adjust k after every posterior refresh from the Q-variance."""
+    variance_target: float = 1.0
+    """epsilon of Algorithm 1: k += 1 when the Q-variance is below it, k -= 1 when above."""
+    k_min: int = 1
+    """Lower bound for k."""
+    k_max: int = 500
+    """Upper bound for k."""
+    empty_buffer: bool = True
+    """Empty the replay buffer after each change of k (k-step targets are formed on sampling, so
+    keeping it is possible; off keeps every stored step)."""
+    empty_every_refresh: bool = False
+    """Empty the replay buffer after every posterior refresh whether k changed or not, as
+    Algorithm 1 line 7 reads literally ('...; Empty Replay buffer.' follows both branches)."""
+
+
+@dataclass(frozen=True)
+class AtariConfig:
+    """Standard Atari preprocessing (SPEC section 3; Machado et al. 2018, Mnih et al. 2015)."""
+
+    frame_skip: int = 4
+    """Environment frames per agent step (max-pooled over the last two)."""
+    noop_max: int = 30
+    """Each game starts with a uniform 1..noop_max no-op emulator frames, in training and
+    evaluation (0: none)."""
+    screen_size: int = 84
+    """Side of the square grey observation."""
+    frame_stack: int = 4
+    """Number of stacked frames; the replay stores each frame once and stacks at sample time."""
+    terminal_on_life_loss: bool = True
+    """Training only: treat a life loss as terminal (the game continues)."""
+    clip_rewards: bool = True
+    """Training only: clip rewards to their sign."""
+    repeat_action_probability: float = 0.0
+    """Sticky actions (ALE v5 uses 0.25); 0 reproduces the DQN/BDQN protocol."""
+    backend: Literal["auto", "gymnasium", "envpool"] = "auto"
+    """Training environments: envpool's C++ vector (pip install 'farsighter[envpool]'), the
+    Gymnasium wrappers, or auto (envpool when installed, the game is there and noop_max >= 1).
+    Same preprocessing and step contract (tests/test_envpool_vec.py); no-op and sticky-action
+    draws come from each backend's own generators, so the same seed gives equally distributed
+    but different starts. Evaluation always uses Gymnasium."""
+    envpool_threads: int = 0
+    """envpool worker threads (0: one per environment, up to the CPU count)."""
+    max_frames_per_episode: int = 108_000
+    """Emulator frames after which ALE truncates an episode, no-ops included (108,000 frames =
+    30 minutes of play; ALE v5's max_num_frames_per_episode, Machado et al. 2018); training
+    and evaluation."""
+
+
+@dataclass(frozen=True)
+class NAFConfig:
+    """Continuous agents naf, knaf, bnaf, farsighter-naf (paper sections 3.3, 4.3; Algorithm 3).
+
+    The TD update of theta, theta_V, theta_P uses the top-level optimizer, lr, batch_size,
+    train_every, loss and gamma; the fields below are what NAF adds.
+    """
+
+    hidden_sizes: tuple[int, ...] = (64, 32)
+    """Representation MLP phi(s). Appendix 9.1.2: two layers of 64 and 32 units."""
+    tau: float = 0.005
+    """Rate of the soft target update theta' <- tau theta + (1 - tau) theta' (Algorithm 3 line
+    11). Gu et al. (2016) use 0.001; 0.005 is TD3's / SB3's default."""
+    soft_update: Literal["every_update", "every_n"] = "every_update"
+    """When the soft target update runs: after every TD update (the convention of NAF's and
+    DDPG's code, Gu et al. 2016, Lillicrap et al. 2016), or once every N =
+    ``target_update_every`` environment steps, as Algorithm 3 line 11 reads literally."""
+    updates_per_step: int = 1
+    """TD updates per ``train_every`` environment steps (the I iterations of Algorithm 3 line 7)."""
+    noise: Literal["gaussian", "ou"] = "gaussian"
+    """Action noise of naf/knaf: Gaussian (TD3-style) or Ornstein-Uhlenbeck (DDPG, used by Gu et
+    al. 2016). The Bayesian agents explore by sampling mu-layer weights instead."""
+    noise_std: float = 0.1
+    """Noise scale as a fraction of the half action range. TD3 uses 0.1; DDPG's OU sigma is 0.2."""
+    ou_theta: float = 0.15
+    """Mean reversion of the OU process x += -theta x + sigma N(0, 1) (Lillicrap et al. 2016)."""
+    mu_penalty: float = 0.0
+    """L2 penalty on the mu-layer's pre-tanh output (mean weights), added to naf/knaf's TD loss
+    and to the Bayesian agents' ELBO (0: off; bnaf and farsighter-naf default to 0.1, our
+    tuning). The Bayesian agents explore only through weight draws of the mu-layer: deep in
+    tanh's saturation the draws no longer move the action, and with little action spread NAF's
+    P is not identified. On Pendulum-v1 farsighter-naf (k = 2) without it saturated (|pre-tanh|
+    ~ 20) and P fell to its floor in 2 of 3 seeds; at 0.01 one seed still lost P; at 0.1 all
+    learned (benchmarks/results/learning_pendulum.json). SAC's code regularises its pre-tanh
+    mean with 1e-3 (Haarnoja et al. 2018). naf/knaf explore with additive action noise, which
+    saturation does not silence, and keep 0."""
+    prior_std: float = 0.1
+    """Prior N(0, prior_std^2) on every mu-layer weight; Table 1's prior sigma = 0.1."""
+    init_sigma: float = 0.002
+    """Initial posterior std of every mu-layer weight. Our choice: the pre-tanh action spread
+    is |phi| sigma, and |phi| grows to ~80 with the value scale on Pendulum (spread ~0.16)."""
+    noise_std_eps: float = 1.0
+    """sigma_eps of the Gaussian likelihood of the TD targets in the ELBO (Table 1: 1)."""
+    elbo_every: int = 10_000
+    """M: environment steps between ELBO updates of the mu-layer (Table 1: M = 10 N, N = 1k for
+    robotic control)."""
+    elbo_steps: int = 100
+    """Gradient steps of one ELBO update (the paper does not say; our choice)."""
+    elbo_batch: int = 1_000
+    """Minibatch of one ELBO step; Table 1: posterior update mini-batch 1k tuples (robotic)."""
+    elbo_lr: float = 0.001
+    """Adam learning rate of the mu-layer's means in the ELBO update."""
+    elbo_rho_lr: float = 0.01
+    """Adam learning rate of the mu-layer's rho (sigma = softplus(rho)): sigma moves slowly
+    with the means' rate (a note of bayes_layer's author)."""
+    kl_weight: float = 0.01
+    """Weight of KL(q || prior) / |replay| in the ELBO (1: the true ELBO of Eq. 10). Our choice
+    (a tempered posterior): at 1 the KL's pull of the means to 0 (w / prior_std^2 / |replay|)
+    erased mu's state dependence and its pull of sigma to prior_std flooded the actions with
+    noise, and NAF's P collapsed to 0 on Pendulum with k >= 2 (our runs)."""
+    her: bool = False
+    """Hindsight experience replay, future strategy (Andrychowicz et al. 2017), for
+    goal-conditioned (dict-observation) tasks; relabels goals when sampling."""
+    her_ratio: float = 0.8
+    """Fraction of relabelled samples; 0.8 is the paper's future_k = 4 (1 - 1 / (1 + 4))."""
+
+
+@dataclass(frozen=True)
+class OB2IConfig:
+    """OB2I (Bai et al. 2021): bootstrapped Q-heads, UCB-bonus, episodic backward update.
+
+    Defaults are the authors' code (Baichenjia/OB2I, ``run_atari.py --ebu --reward-type ucb``) as
+    recorded in SPEC section 2.3; the epsilon schedule 1.0 -> 0.1 is the ob2i algorithm's own
+    (:mod:`farsighter.algorithms`).
+    """
+
+    num_heads: int = 10
+    """K: linear Q-heads on the shared torso, all trained on every sample (code: --num-ensemble 10)."""
+    separate_heads: bool = True
+    """Each head has its own last hidden layer, as in the authors' network (a 512-unit layer per
+    head on the shared convolutional torso; for an MLP torso the last layer of hidden_sizes is
+    replicated per head). False: linear heads on one shared torso (this library before v0.2)."""
+    beta: float = 0.5
+    """Diffusion factor of the episodic backward update (EBU, Lee et al. 2019; code: --beta 0.5)."""
+    bonus_reward_weight: float = 5e-5
+    """alpha_1: weight of the immediate UCB-bonus, the std over online heads of Q_k(s, a)
+    (code: --rew-immed-ratio-ebu 5e-5)."""
+    bonus_next_weight: float = 5e-5
+    """alpha_2: weight of the next-state UCB-bonus, the std over target heads at (s', a'_k)
+    (code: --rew-nextq-ratio-ebu 5e-5)."""
+    normalize_next_bonus: bool = True
+    """Divide the next-state bonus by a running std of its values (code: --normnxq-ebu True)."""
+    normalize_reward_bonus: bool = False
+    """Same for the immediate bonus (code: --normrew-ebu False; the code's EBU path normalises it
+    anyway through a tuple-truthiness slip, so True reproduces what it ran)."""
+    eval_policy: Literal["vote", "mean"] = "vote"
+    """Greedy (evaluation) action: majority vote of the heads (the authors' evaluation), ties
+    broken by the mean Q; or the argmax of the heads' mean Q."""
+
+
+@dataclass(frozen=True)
+class RNDConfig:
+    """Random network distillation (Burda et al. 2018) on DDQN: rnd (1-step) and krnd (k-step),
+    the RND and TD(K)+RND baselines of the paper's appendix 9.1.1."""
+
+    intrinsic_weight: float = 0.5
+    """Weight of the normalised intrinsic reward added to the extrinsic reward (RND paper:
+    intrinsic and extrinsic advantage coefficients 1 and 2, i.e. 0.5 relative)."""
+    feature_dim: int = 512
+    """Output size of the fixed random target network and of the predictor (RND paper: 512)."""
+    lr: float = 1e-4
+    """Adam learning rate of the predictor (RND paper: 1e-4)."""
+    normalize_obs: bool = True
+    """Whiten flat observations with a running mean/std before both RND networks (RND paper
+    section 2.4); image observations are scaled to [0, 1] instead."""
+    obs_clip: float = 5.0
+    """Whitened observations are clipped to [-obs_clip, obs_clip] (RND paper: 5)."""
+
+
+@dataclass(frozen=True)
+class Config:
+    """One training run: everything needed to reproduce it."""
+
+    algo: str = "ddqn"
+    """Algorithm: one of ddqn, kddqn, bdqn, farsighter, ob2i, rnd, krnd (discrete actions); naf,
+    knaf, bnaf, farsighter-naf (continuous). farsighter.algorithms is the table."""
+    env: str = "CartPole-v1"
+    """Any Gymnasium id, passed to gymnasium.make unchanged (``module:EnvId`` works)."""
+    seed: int = 1
+    """Seed of the run (networks, exploration, replay sampling, environments)."""
+    total_steps: int = 100_000
+    """Environment steps to train for (summed over vectorised environments)."""
+    run_dir: str = ""
+    """Run directory; empty means runs/<env>__<algo>__s<seed>."""
+    preset: str = "auto"
+    """Preset the defaults came from (auto: atari for Atari ids, continuous for the NAF agents,
+    general otherwise)."""
+    device: str = "auto"
+    """auto (CUDA when present, else CPU), cpu, cuda or cuda:N."""
+    precision: Literal["fp32", "bf16"] = "fp32"
+    """Arithmetic of the networks' torsos: fp32, or bf16 autocast (bfloat16 convolutions and
+    matmuls). Its speed depends on the CPU, not only on its flags, so measure it there
+    (python -m benchmarks.update_profile): Atari updates 1.37x faster on one of this project's
+    machines (AVX-512 BF16, no AMX: 13.9 ms against 19.1 ms fp32), slower on a user's CPU with
+    the same flags (38.9 ms against 26.9 ms fp32; issue #26); no faster on an H100 at batch 32, where
+    the update is bound by kernel launches; slow where the hardware lacks bfloat16. Features,
+    heads, the BLR posterior, targets, losses, parameters and optimizer state stay fp32 either
+    way. Never on unless asked; docs/design.md gives its measured effect on learning."""
+    cuda_graph: Literal["auto", "on", "off"] = "auto"
+    """Capture the update step (forward, loss, backward, optimizer) as a CUDA graph and replay it
+    each update, so the host launches it once instead of kernel by kernel
+    (farsighter.agents.cuda_graph). auto: on a CUDA device, for the agents whose update allows
+    it (ddqn, kddqn, bdqn, farsighter); on: insist (refused for the others, and on CPU); off:
+    eager. The updates are the same either way. Off when compile is on."""
+    overlap_env: Literal["auto", "on", "off"] = "auto"
+    """Step the environments while the updates run: at each vector step the actions are sent,
+    the updates owed are made while the games step on their own threads, and the step's
+    transitions are stored after them (so those updates sample the replay one vector step
+    older; the next ones see it). Needs environments that step asynchronously (the envpool
+    Atari backend). auto: on with such environments on a CUDA device; on: also on a CPU
+    (refused where the environments cannot); off: act, step, store, update in turn."""
+    gpu_replay: Literal["auto", "off"] = "auto"
+    """auto: on a CUDA device, the replay's observations are also kept in GPU memory and
+    minibatches are stacked there, so only row indices cross from the host per update (one byte
+    per pixel: 0.7 GB of GPU memory per 100k Atari frames, 7 GB for a 1M buffer), when that fits
+    in half the GPU's free memory (else on the host, with a warning); off: stacked on the host
+    and copied. The minibatches are the same either way."""
+    target_cache: Literal["auto", "off"] = "auto"
+    """auto: with ``sample_recent`` and an eager update (no CUDA graph, not compiled), Farsighter
+    and BDQN keep the target network's features of each sampled next state until the next
+    target copy (farsighter.replay.target_cache), so an update runs the target network only
+    over next states not seen since that copy (with Table 1's values each is drawn about 8
+    times per copy). The math is the same; the float rounding can differ from off, as the
+    target network then sees other batch sizes. off: the target network runs over every
+    minibatch."""
+    compile: bool = False
+    """torch.compile the update step (forward, target, loss, backward, clip, optimizer) of
+    ddqn, kddqn, bdqn and farsighter (farsighter.agents.cuda_graph.wrap_step): fused
+    element-wise work, on CPU in C++. The first update compiles (about 20 s on a 2-core CPU; a
+    few seconds once the kernels are in Inductor's disk cache), and a CPU needs a C++ compiler.
+    The math is the same; the float rounding differs from eager. Measured and tested on CPU;
+    docs/design.md gives its speed."""
+    resume: bool = False
+    """Continue the run in run_dir from its last checkpoint."""
+    overwrite: bool = False
+    """Delete an existing run_dir and start afresh."""
+    num_envs: int = 1
+    """Environments stepped together (acting is batched over them)."""
+
+    # ----- learning (paper Table 1 unless noted) -----
+    optimizer: Literal["rmsprop", "adam"] = "rmsprop"
+    """Optimizer of the representation. Table 1: RMSProp."""
+    lr: float = 0.0025
+    """Learning rate. Table 1: 0.0025."""
+    rmsprop_alpha: float = 0.95
+    """RMSProp decay of the (squared) gradient averages; Table 1's 'momentum 0.95'."""
+    rmsprop_centered: bool = True
+    """Centered RMSProp (Graves 2013) as in DQN, whose 'gradient momentum' Table 1 reuses."""
+    optim_eps: float = 0.01
+    """Epsilon of the optimizer (DQN's 'min squared gradient' 0.01 for RMSProp)."""
+    gamma: float = 0.99
+    """Discount factor. Table 1: 0.99."""
+    k: int = 1
+    """Steps per return: 1 is one-step TD; k > 1 uses k-step returns with gamma^k bootstraps."""
+    k_target: Literal["k", "max"] = "k"
+    """k: the k-step target (section 4.4). max (bdqn, farsighter): the larger of the k-step and
+    the one-step target of each sampled start. A k-step return follows the behaviour for k steps,
+    so an exploratory episode that ended early makes it pessimistic and stops optimism from
+    propagating; in a deterministic task every realised return is a lower bound on Q*, and the
+    max keeps the one-step optimality target while the k-step return still carries found reward
+    k steps back at once (lower-bound Q-learning, Tang 2020). Biased upwards where rewards or
+    transitions are noisy; one more forward pass per update. Our extension, not the paper's."""
+    stride: bool = False
+    """Algorithm 1 literally: one k-step tuple per k steps instead of one starting at every step."""
+    batch_size: int = 32
+    """Minibatch size of the representation update. Table 1: 32."""
+    buffer_size: int = 1_000_000
+    """Replay capacity in transitions. Table 1: 1M."""
+    sample_recent: bool = False
+    """Draw minibatches only from the latest `recent_window` transitions (Algorithm 1 line 4)."""
+    recent_window: int = 0
+    """Size of that window; 0 means N = target_update_every, as the paper says."""
+    learning_starts: int = 1_000
+    """Environment steps of pure exploration before the first update."""
+    train_every: int = 4
+    """Environment steps between representation updates. Table 1: 4."""
+    target_update_every: int = 1_000
+    """N: steps between target network copies. Table 1: 1k control, 10k Atari."""
+    loss: Literal["huber", "mse"] = "huber"
+    """TD loss: mse is Eq. 3 literally; huber is DQN's error clipping, more stable."""
+    max_grad_norm: float = 10.0
+    """Gradient norm clip (0 disables)."""
+    eps_start: float = 1.0
+    """Initial epsilon of epsilon-greedy exploration (ddqn, kddqn)."""
+    eps_end: float = 0.05
+    """Final epsilon."""
+    eps_decay_steps: int = 10_000
+    """Steps of the linear decay from eps_start to eps_end."""
+    hidden_sizes: tuple[int, ...] = (64, 64)
+    """MLP torso for flat observations (images use the Nature CNN, appendix 9.1.1)."""
+
+    # ----- evaluation, logging, checkpoints -----
+    eval_every: int = 10_000
+    """Steps between evaluation phases (0 disables periodic evaluation)."""
+    eval_episodes: int = 10
+    """Episodes per evaluation phase."""
+    eval_epsilon: float = 0.0
+    """Epsilon of the evaluation policy (greedy under the posterior mean for Bayesian agents)."""
+    eval_max_steps: int = 27_000
+    """Cap on agent steps of one evaluation episode (27,000 = 108,000 frames at frame skip 4).
+    ALE ids are also truncated by the emulator at atari.max_frames_per_episode frames, which
+    binds first."""
+    checkpoint_every: int = 25_000
+    """Steps between checkpoints (0: only at the end)."""
+    save_replay: bool = True
+    """Store the replay buffer in checkpoints, so a resumed run equals an uninterrupted one."""
+    log_every: int = 1_000
+    """Steps between SPS/loss rows in TensorBoard."""
+    progress: bool = True
+    """Show a progress bar (steps, SPS, recent return)."""
+    torch_threads: int = 0
+    """CPU threads for torch (0: torch's default)."""
+
+    blr: BLRConfig = field(default_factory=BLRConfig)
+    """Bayesian linear regression head (bdqn, farsighter)."""
+    adaptive_k: AdaptiveKConfig = field(default_factory=AdaptiveKConfig)
+    """Adaptive k (farsighter)."""
+    atari: AtariConfig = field(default_factory=AtariConfig)
+    """Atari preprocessing (applied automatically to ALE ids)."""
+    ob2i: OB2IConfig = field(default_factory=OB2IConfig)
+    """OB2I heads, bonus and backward update (ob2i)."""
+    rnd: RNDConfig = field(default_factory=RNDConfig)
+    """Random network distillation bonus (rnd, krnd)."""
+    naf: NAFConfig = field(default_factory=NAFConfig)
+    """Continuous-action agents (naf, knaf, bnaf, farsighter-naf)."""
+
+    @property
+    def effective_recent_window(self) -> int:
+        """Window of Algorithm 1 line 4 (N when `recent_window` is 0)."""
+        return self.recent_window or self.target_update_every
+
+    def default_run_dir(self) -> Path:
+        safe_env = self.env.replace("/", "-").replace(":", "-")
+        return Path("runs") / f"{safe_env}__{self.algo}__s{self.seed}"
+
+    @property
+    def resolved_run_dir(self) -> Path:
+        return Path(self.run_dir) if self.run_dir else self.default_run_dir()
