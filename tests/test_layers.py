@@ -67,3 +67,15 @@ def test_the_package_graph_has_no_cycle() -> None:
     except graphlib.CycleError as err:
         raise AssertionError(f"import cycle: {' -> '.join(err.args[1])}") from None
     assert order.index("sweep") < order.index("studies")
+
+
+def test_no_function_of_the_package_is_over_80_lines() -> None:
+    """Issue #26: a function that does not fit on a screen is split (docstring included)."""
+    long = []
+    for file in ROOT.rglob("*.py"):
+        for node in ast.walk(ast.parse(file.read_text())):
+            if isinstance(node, ast.FunctionDef | ast.AsyncFunctionDef):
+                length = (node.end_lineno or node.lineno) - node.lineno + 1
+                if length > 80:
+                    long.append(f"{file.relative_to(ROOT)}:{node.lineno} {node.name} ({length})")
+    assert long == []

@@ -55,6 +55,27 @@ def _run_checks(cfg: Config, spec: algorithms.Algorithm) -> list[tuple[bool, str
             f"({cfg.buffer_size // max(cfg.num_envs, 1)})",
         ),
         (all(h > 0 for h in cfg.hidden_sizes), "hidden_sizes must be positive integers"),
+        (cfg.eval_episodes >= 1, "eval_episodes must be >= 1"),
+        (
+            cfg.eval_every >= 0,
+            f"eval_every must be >= 0 (0: no periodic evaluation; got {cfg.eval_every})",
+        ),
+        (cfg.eval_max_steps >= 1, f"eval_max_steps must be >= 1 (got {cfg.eval_max_steps})"),
+        (cfg.log_every >= 1, f"log_every must be >= 1 (got {cfg.log_every})"),
+        (cfg.checkpoint_every >= 0, "checkpoint_every must be >= 0"),
+        (cfg.torch_threads >= 0, "torch_threads must be >= 0"),
+        (
+            cfg.precision in ("fp32", "bf16"),
+            f"precision must be fp32 or bf16 (got {cfg.precision!r})",
+        ),
+        *_atari_checks(cfg),
+        *_posterior_checks(cfg),
+    ]
+
+
+def _atari_checks(cfg: Config) -> list[tuple[bool, str]]:
+    """The Atari preprocessing fields."""
+    return [
         (cfg.atari.frame_skip >= 1, f"atari.frame_skip must be >= 1 (got {cfg.atari.frame_skip})"),
         (
             cfg.atari.frame_stack >= 1,
@@ -76,6 +97,12 @@ def _run_checks(cfg: Config, spec: algorithms.Algorithm) -> list[tuple[bool, str
             "atari.max_frames_per_episode must be >= 0 (0: no cap; got "
             f"{cfg.atari.max_frames_per_episode})",
         ),
+    ]
+
+
+def _posterior_checks(cfg: Config) -> list[tuple[bool, str]]:
+    """The BLR posterior and adaptive-k fields."""
+    return [
         (cfg.blr.prior_std > 0, f"blr.prior_std must be > 0 (got {cfg.blr.prior_std})"),
         (cfg.blr.noise_std > 0, f"blr.noise_std must be > 0 (got {cfg.blr.noise_std})"),
         (cfg.blr.cov_scale > 0, f"blr.cov_scale must be > 0 (got {cfg.blr.cov_scale})"),
@@ -91,19 +118,6 @@ def _run_checks(cfg: Config, spec: algorithms.Algorithm) -> list[tuple[bool, str
             not cfg.adaptive_k.enabled or cfg.adaptive_k.k_min <= cfg.k <= cfg.adaptive_k.k_max,
             f"with adaptive k, the initial k ({cfg.k}) must lie in [k_min, k_max] = "
             f"[{cfg.adaptive_k.k_min}, {cfg.adaptive_k.k_max}]",
-        ),
-        (cfg.eval_episodes >= 1, "eval_episodes must be >= 1"),
-        (
-            cfg.eval_every >= 0,
-            f"eval_every must be >= 0 (0: no periodic evaluation; got {cfg.eval_every})",
-        ),
-        (cfg.eval_max_steps >= 1, f"eval_max_steps must be >= 1 (got {cfg.eval_max_steps})"),
-        (cfg.log_every >= 1, f"log_every must be >= 1 (got {cfg.log_every})"),
-        (cfg.checkpoint_every >= 0, "checkpoint_every must be >= 0"),
-        (cfg.torch_threads >= 0, "torch_threads must be >= 0"),
-        (
-            cfg.precision in ("fp32", "bf16"),
-            f"precision must be fp32 or bf16 (got {cfg.precision!r})",
         ),
     ]
 

@@ -91,6 +91,24 @@ def envpool_supports(env_id: str, noop_max: int) -> bool:
     return True
 
 
+def _check_settings(
+    num_envs: int, noop_max: int, frame_skip: int, frame_stack: int, screen_size: int
+) -> None:
+    """One EnvError line for settings the envpool backend cannot serve."""
+    if num_envs < 1:
+        raise EnvError(f"num_envs must be >= 1 (got {num_envs})")
+    if noop_max < 1:
+        raise EnvError(
+            f"the envpool Atari backend needs noop_max >= 1 (got {noop_max}): envpool always "
+            "takes at least one no-op frame at a game start; use the Gymnasium backend"
+        )
+    if frame_skip < 1 or frame_stack < 1 or screen_size < 1:
+        raise EnvError(
+            f"frame_skip, frame_stack and screen_size must be >= 1 (got {frame_skip}, "
+            f"{frame_stack}, {screen_size})"
+        )
+
+
 class EnvpoolAtariVector(gym.vector.VectorEnv):
     """``num_envs`` Atari games stepped together by envpool, with :func:`wrap_atari`'s
     preprocessing and Gymnasium's SAME_STEP autoreset contract:
@@ -150,18 +168,7 @@ class EnvpoolAtariVector(gym.vector.VectorEnv):
         max_episode_steps: int | None = None,
         num_threads: int = 1,
     ) -> None:
-        if num_envs < 1:
-            raise EnvError(f"num_envs must be >= 1 (got {num_envs})")
-        if noop_max < 1:
-            raise EnvError(
-                f"the envpool Atari backend needs noop_max >= 1 (got {noop_max}): envpool always "
-                "takes at least one no-op frame at a game start; use the Gymnasium backend"
-            )
-        if frame_skip < 1 or frame_stack < 1 or screen_size < 1:
-            raise EnvError(
-                f"frame_skip, frame_stack and screen_size must be >= 1 (got {frame_skip}, "
-                f"{frame_stack}, {screen_size})"
-            )
+        _check_settings(num_envs, noop_max, frame_skip, frame_stack, screen_size)
         self.task_id = task_id
         self.num_envs = num_envs
         self.frame_stack = frame_stack

@@ -421,6 +421,31 @@ def _plot(study: dict[str, Any], runs: Runs, file: Path) -> None:
             ax.set_visible(False)
 
 
+def _claims_section(rows: list[dict[str, Any]]) -> list[str]:
+    """The report's claims: Farsighter against each other agent, per game."""
+    lines: list[str] = []
+    lines += [
+        "## Claims",
+        "",
+        "Per game, Farsighter against each other agent, decided by a 95% bootstrap confidence "
+        "interval of the difference of mean final scores over seeds (holds / does not hold / "
+        "undecided at this budget).",
+        "",
+    ]
+    found = claims(rows)
+    counts = {v: sum(1 for *_, x in found if x == v) for v in ("holds", "does not hold")}
+    for game, text, verdict in found:
+        lines.append(f"- {game}: {text}: **{verdict}**")
+    if found:
+        lines += [
+            "",
+            f"In all: {counts['holds']} comparisons hold, {counts['does not hold']} do not, "
+            f"{len(found) - sum(counts.values())} are undecided (the paper: Farsighter leads in "
+            "36 of 49 games).",
+        ]
+    return lines
+
+
 def _report(
     study: dict[str, Any],
     rows: list[dict[str, Any]],
@@ -473,25 +498,7 @@ def _report(
             rl.strip(),
             "",
         ]
-    lines += [
-        "## Claims",
-        "",
-        "Per game, Farsighter against each other agent, decided by a 95% bootstrap confidence "
-        "interval of the difference of mean final scores over seeds (holds / does not hold / "
-        "undecided at this budget).",
-        "",
-    ]
-    found = claims(rows)
-    counts = {v: sum(1 for *_, x in found if x == v) for v in ("holds", "does not hold")}
-    for game, text, verdict in found:
-        lines.append(f"- {game}: {text}: **{verdict}**")
-    if found:
-        lines += [
-            "",
-            f"In all: {counts['holds']} comparisons hold, {counts['does not hold']} do not, "
-            f"{len(found) - sum(counts.values())} are undecided (the paper: Farsighter leads in "
-            "36 of 49 games).",
-        ]
+    lines += _claims_section(rows)
     lines += [
         "",
         "## Figure",

@@ -84,7 +84,7 @@ import difflib
 import functools
 import itertools
 import typing
-from collections.abc import Mapping
+from collections.abc import Callable, Mapping
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any, Literal, NoReturn
@@ -297,28 +297,7 @@ def parse_spec(data: Any, source: str) -> SweepSpec:
         fail("missing [grid]: give at least grid.agent, grid.env and grid.seed")
     grid = _grid(data["grid"], source)
 
-    labels: list[tuple[str, str, dict[str, Any]]] = []  # label, algo, overrides (with preset)
-    for label in grid["agent"]:
-        if not isinstance(label, str):
-            fail(f"grid.agent: agents are names (got {label!r})")
-        if label in agents:
-            algo, overrides = agents[label]
-        elif label in algorithms.NAMES:
-            algo, overrides = label, {}
-        else:
-            defined = ", ".join(agents) or "none defined"
-            fail(
-                f"grid.agent: unknown agent '{label}'; accepted: algorithm names "
-                f"({algorithms.accepted()}) or labels from [agents] ({defined})"
-            )
-        labels.append((label, algo, overrides))
-    for env in grid["env"]:
-        if not isinstance(env, str) or not slug(env):
-            fail(f"grid.env: environments are Gymnasium ids such as 'CartPole-v1' (got {env!r})")
-    for seed in grid["seed"]:
-        if not isinstance(seed, int) or isinstance(seed, bool) or seed < 0:
-            fail(f"grid.seed: seeds are integers >= 0 (got {seed!r})")
-
+    labels = _grid_agents(grid, agents, fail)
     swept_keys = [key for key in grid if key not in AXES]
     trials: list[Trial] = []
     product = itertools.product(
@@ -346,6 +325,37 @@ def parse_spec(data: Any, source: str) -> SweepSpec:
             fail(f"trial {trial.name}: {exc}")
 
     return SweepSpec(name, description, tuple(trials), resources, source)
+
+
+def _grid_agents(
+    grid: dict[str, list[Any]],
+    agents: dict[str, tuple[str, dict[str, Any]]],
+    fail: Callable[[str], NoReturn],
+) -> list[tuple[str, str, dict[str, Any]]]:
+    """(label, algorithm, overrides with the preset) of every grid agent; the grid's envs and
+    seeds checked too."""
+    labels: list[tuple[str, str, dict[str, Any]]] = []  # label, algo, overrides (with preset)
+    for label in grid["agent"]:
+        if not isinstance(label, str):
+            fail(f"grid.agent: agents are names (got {label!r})")
+        if label in agents:
+            algo, overrides = agents[label]
+        elif label in algorithms.NAMES:
+            algo, overrides = label, {}
+        else:
+            defined = ", ".join(agents) or "none defined"
+            fail(
+                f"grid.agent: unknown agent '{label}'; accepted: algorithm names "
+                f"({algorithms.accepted()}) or labels from [agents] ({defined})"
+            )
+        labels.append((label, algo, overrides))
+    for env in grid["env"]:
+        if not isinstance(env, str) or not slug(env):
+            fail(f"grid.env: environments are Gymnasium ids such as 'CartPole-v1' (got {env!r})")
+    for seed in grid["seed"]:
+        if not isinstance(seed, int) or isinstance(seed, bool) or seed < 0:
+            fail(f"grid.seed: seeds are integers >= 0 (got {seed!r})")
+    return labels
 
 
 def _grid(raw: Any, source: str) -> dict[str, list[Any]]:
