@@ -19,8 +19,8 @@ from farsighter.config import PRESETS, make_config, validate
 from farsighter.envs import make_env
 from farsighter.envs.chain import ChainEnv, chain_id
 from farsighter.errors import ConfigError, EnvError
+from farsighter.exploration.revisit import EpisodeVisits
 from farsighter.ops.blr import BLRHead, residual_variance
-from farsighter.ops.revisit import EpisodeVisits
 from farsighter.replay import VectorStep
 from tests.conftest import tiny
 

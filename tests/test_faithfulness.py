@@ -252,7 +252,7 @@ def test_thompson_target_uses_the_acting_draw(tmp_path: Path) -> None:
     feed(agent, 300)
     agent.refresh_posterior()
     agent.act(np.zeros((1, 4), np.float32), 10)
-    w_AD = agent.w_EAD[0].clone()  # type: ignore[index]
+    w_AD = agent.exploration.w_EAD[0].clone()  # type: ignore[index]
     t = minibatch(agent)
     with torch.no_grad():
         a_star = (agent.torso(t.next_obs_B) @ w_AD.T).argmax(1)

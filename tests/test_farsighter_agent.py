@@ -7,9 +7,11 @@ from pathlib import Path
 
 import gymnasium as gym
 import numpy as np
+import pytest
 import torch
 
 from farsighter.agents.farsighter import FarsighterAgent
+from farsighter.exploration import SCHEDULES
 from farsighter.replay import VectorStep
 from tests.conftest import tiny
 
@@ -152,3 +154,31 @@ def test_recent_rows_keep_the_latest_rows_in_order() -> None:
         copy = RecentRows(10)
         copy.load_state_dict(ring.state_dict())
         assert torch.equal(copy.rows(), reference)
+
+
+@pytest.mark.parametrize("redraw", list(SCHEDULES))
+def test_exploration_resumes_its_draws_from_new_and_old_checkpoints(
+    tmp_path: Path, redraw: str
+) -> None:
+    """Every blr.redraw value has its schedule, and an agent restored from a checkpoint (the
+    current layout, or the one from before the exploration object, with its pieces under the
+    agent's own keys) acts as the uninterrupted agent does."""
+    from typing import get_args, get_type_hints
+
+    from farsighter.config import BLRConfig
+
+    assert set(SCHEDULES) == set(get_args(get_type_hints(BLRConfig)["redraw"]))
+    rng = np.random.default_rng(3)
+    obs = [rng.normal(size=(1, 4)).astype(np.float32) for _ in range(6)]
+    agent = make_agent(tmp_path, blr__prior_std=10.0, blr__redraw=redraw, blr__redraw_every=3)
+    for t in range(10):
+        agent.act(obs[t % 4], 10)  # states repeat: revisit redraws
+    saved = agent.state_dict(include_replay=False)
+    old = {k: v for k, v in saved.items() if k != "exploration"}
+    old.update(saved["exploration"])  # the layout before: w_EAD, draws, redraw_E, visits
+    later = [agent.act(obs[t % 6], 10) for t in range(12)]
+    for state in (saved, old):
+        twin = make_agent(tmp_path, blr__prior_std=10.0, blr__redraw=redraw, blr__redraw_every=3)
+        twin.load_state_dict(state)
+        assert [twin.act(obs[t % 6], 10) for t in range(12)] == later
+        assert twin.counters.draws == agent.counters.draws

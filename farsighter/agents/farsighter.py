@@ -5,7 +5,7 @@ Q(s, a) = phi_theta(s)^T w_a with a Bayesian linear regression posterior over ea
 * Acting (Algorithm 2): a Thompson draw w_a = mean_a + chol(Cov_a) z (Eq. 7), one independent z
   per action and per environment; Farsighter draws afresh at every step, BDQN every T steps;
   ``blr.redraw`` also holds a draw for k steps, for a whole episode, or until the episode
-  revisits a state (farsighter.ops.revisit). Before
+  revisits a state (farsighter.exploration). Before
   ``learning_starts`` actions are uniform, as for the epsilon agents.
 * Learning theta (Eq. 8): the double-Q loss with w fixed at the posterior mean, on k-step
   returns with gamma^k bootstraps (section 4.4), from the latest N transitions (Algorithm 1
@@ -65,21 +65,15 @@ from farsighter.agents.cuda_graph import (
 )
 from farsighter.agents.protocol import AgentFactory
 from farsighter.config import Config
+from farsighter.exploration import ThompsonExploration
 from farsighter.networks import make_torso, online_and_target
-from farsighter.ops.blr import BLRHead, ThompsonDraws, greedy_predictive_variance
-from farsighter.ops.revisit import EpisodeVisits
+from farsighter.ops.blr import BLRHead, greedy_predictive_variance
 from farsighter.ops.targets import double_q_target
 from farsighter.replay import Batch, VectorStep
 from farsighter.replay.target_cache import TargetCache, target_cache_rows
 
 FEATURE_CHUNK = 4_096  # rows per forward pass when computing features for a posterior refresh
 RECENT_FEATURES = 2_048  # incremental mode: minibatch features kept for adaptive k's Q-variance
-
-
-def _q_under(phi_ED: torch.Tensor, w_EAD: torch.Tensor) -> torch.Tensor:
-    """Q(s_e, a) = phi(s_e)^T w_ea under each environment's own weight draw, shape (E, A): one
-    batched matrix-vector product (what einsum "ed,ead->ea" computes, without its parsing)."""
-    return torch.bmm(w_EAD, phi_ED.unsqueeze(2)).squeeze(2)
 
 
 @dataclass
@@ -128,7 +122,6 @@ class FarsighterAgent:
         )
         self.head.set_mean(init_AD.to(device))
         self.target_mean_AD = self.head.mean_AD.clone()
-        self.draws = ThompsonDraws(self.head)  # the acting draws of blr.redraw = step
         self.opt = make_optimizer(self.torso.parameters(), cfg)
         # The update as a CUDA graph on a GPU (cfg.cuda_graph), or compiled (cfg.compile):
         # farsighter.agents.cuda_graph.
@@ -155,11 +148,8 @@ class FarsighterAgent:
         self.counters = FarsighterCounters(k=cfg.k)
         # Incremental mode: recent minibatch features, for the Q-variance of adaptive k.
         self.recent_phi = RecentRows(RECENT_FEATURES)
-        # Per-environment weight draws for redraw = k / every / episode.
-        self.w_EAD: torch.Tensor | None = None
-        self.redraw_E = np.ones(cfg.num_envs, dtype=bool)
-        # redraw = revisit: the states each environment's episode has visited.
-        self.visits = EpisodeVisits(cfg.num_envs)
+        # Eq. 7: each environment's weight draw and when it is replaced (blr.redraw).
+        self.exploration = ThompsonExploration(cfg, self.head, self.counters)
 
     # ------------------------------------------------------------------ acting
     def act(self, obs_E: np.ndarray, global_step: int, explore: bool = True) -> np.ndarray:
@@ -168,51 +158,11 @@ class FarsighterAgent:
             return np.asarray(self.rng.integers(0, self.num_actions, size=n))
         with torch.no_grad():
             phi_ED = self.torso(obs_tensor(obs_E, self.device))
-            if not explore:  # evaluation: greedy under the posterior mean
+            if explore:  # Algorithm 2: Thompson sampling under each environment's draw
+                q_EA = self.exploration.q(phi_ED, obs_E, self.gen)
+            else:  # evaluation: greedy under the posterior mean
                 q_EA = phi_ED @ self.head.mean_AD.T
-            else:
-                if self.cfg.blr.redraw == "revisit":  # back at a state of this episode: redraw
-                    self.redraw_E |= self.visits.visit(obs_E)
-                q_EA = self._thompson_q(phi_ED)
         return q_EA.argmax(dim=1).cpu().numpy()
-
-    def _thompson_q(self, phi_ED: torch.Tensor) -> torch.Tensor:
-        blr, c = self.cfg.blr, self.counters
-        n = phi_ED.shape[0]
-        if blr.redraw == "step":
-            # Algorithm 2 line 2: a fresh draw at every step for every environment, made a block
-            # ahead (ThompsonDraws); with blr.target = thompson the Q-loss reuses it.
-            c.draws += n
-            w_EAD = self.draws.take(n, self.gen)
-            if blr.target == "thompson":
-                self.w_EAD = w_EAD.clone()  # not a view: the block is replaced, w_EAD saved
-            return _q_under(phi_ED, w_EAD)
-        # Held draws.
-        if blr.redraw in ("every", "k"):
-            hold = blr.redraw_every if blr.redraw == "every" else c.k
-            if self.w_EAD is None or c.steps_since_draw >= hold:
-                self.redraw_E[:] = True
-                c.steps_since_draw = 0
-            c.steps_since_draw += 1
-        if self.w_EAD is None or self.w_EAD.shape[0] != n:
-            self.w_EAD = self.head.sample_weights(n, generator=self.gen)
-            c.draws += n
-            self.redraw_E[:] = False
-        elif self.redraw_E.any():
-            idx = np.flatnonzero(self.redraw_E)
-            self.w_EAD[idx] = self.head.sample_weights(len(idx), generator=self.gen)
-            c.draws += len(idx)
-            self.redraw_E[:] = False
-        return _q_under(phi_ED, self.w_EAD)
-
-    def _acting_draw(self) -> torch.Tensor:
-        """The weights (A, D) of the latest acting draw (environment 0), for blr.target = thompson:
-        the BDQN code's Q-loss takes its argmax under the one draw it acts with."""
-        if self.w_EAD is None:  # no Thompson action yet (uniform warm-up): draw as the code does
-            self.w_EAD = self.head.sample_weights(self.cfg.num_envs, generator=self.gen)
-            self.counters.draws += self.cfg.num_envs
-            self.redraw_E[:] = False
-        return self.w_EAD[0]
 
     @torch.no_grad()
     def q_estimate(self, obs_B: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
@@ -223,10 +173,7 @@ class FarsighterAgent:
 
     def observe(self, step: VectorStep) -> None:
         self.replay.add_step(step)
-        if self.cfg.blr.redraw in ("episode", "revisit"):
-            done_E = np.logical_or(step.terminated_E, step.truncated_E)
-            self.redraw_E |= done_E
-            self.visits.end(done_E)
+        self.exploration.observe(np.logical_or(step.terminated_E, step.truncated_E))
 
     # ------------------------------------------------------------------ learning
     def learn(self, global_step: int) -> dict[str, torch.Tensor]:
@@ -279,7 +226,7 @@ class FarsighterAgent:
             phi_next = self.torso(t.next_obs_B)
         if w_online_AD is None:
             thompson = self.cfg.blr.target == "thompson"
-            w_online_AD = self._acting_draw() if thompson else self.head.mean_AD
+            w_online_AD = self.exploration.acting_draw(self.gen) if thompson else self.head.mean_AD
         q_next_online = phi_next @ w_online_AD.T
         q_next_target = phi_next_target @ self.target_mean_AD.T
         if self.cfg.blr.target == "sample":
@@ -343,7 +290,7 @@ class FarsighterAgent:
         the one-step target (``sample``), in the order the eager targets draw them."""
         target = self.cfg.blr.target
         if target == "thompson":
-            return {"w_online_AD": self._acting_draw()}
+            return {"w_online_AD": self.exploration.acting_draw(self.gen)}
         if target != "sample":
             return {}
         draws = {"z_BA": self.head.noise_z(rows, self.gen)}
@@ -454,11 +401,8 @@ class FarsighterAgent:
         "opt",
         "rng",
         "gen",
-        "w_EAD",
-        "draws",
+        "exploration",
         "target_cache",
-        "redraw_E",
-        "visits",
         "recent_phi",
         "counters",
     )
@@ -472,10 +416,10 @@ class FarsighterAgent:
     def load_state_dict(self, state: dict[str, Any]) -> None:
         # The draws and the target cache are kept when they can be: a checkpoint from before
         # them, or saved with another target_cache or compile setting, starts them afresh.
-        own = ("draws", "target_cache", "visits")
+        own = ("exploration", "target_cache")
         load_state(self, [n for n in self.SAVED if n not in own], state)
-        self.draws.load_state_dict(state.get("draws"))
-        self.visits.load_state_dict(state.get("visits"))
+        # a checkpoint from before the exploration object holds its pieces under our own keys
+        self.exploration.load_state_dict(state.get("exploration", state))
         if self.target_cache is not None:  # saved without the replay: None (see state_dict)
             self.target_cache.load_state_dict(state.get("target_cache"))
         set_capturable(self.opt, self.graphs)

@@ -36,7 +36,7 @@ class BLRConfig:
     steps (the horizon of the k-step target), every `redraw_every` steps, once per episode, or
     revisit: held while the episode reaches new states, redrawn at its start and whenever it
     returns to an observation it already saw (commits like a draw per episode, breaks the loops
-    a fixed greedy policy walks; farsighter.ops.revisit). Our extension, not the paper's."""
+    a fixed greedy policy walks; farsighter.exploration.revisit). Our extension, not the paper's."""
     redraw_every: int = 1
     """T for ``redraw=every``."""
     target: Literal["mean", "thompson", "sample"] = "mean"
