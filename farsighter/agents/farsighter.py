@@ -208,14 +208,14 @@ class FarsighterAgent:
         self,
         t: TensorBatch,
         w_online_AD: torch.Tensor | None = None,
-        z_BA: torch.Tensor | None = None,
+        z_BAD: torch.Tensor | None = None,
         phi_next_target: torch.Tensor | None = None,
     ) -> torch.Tensor:
         """y = r^k + gamma^k phi_target(s')^T mean_target[a*] (Eq. 8 with k-step returns).
 
         a* is the argmax under the online features and the posterior mean (Eq. 8), or under the
         latest acting Thompson draw when ``blr.target = thompson`` (the BDQN authors' code).
-        ``w_online_AD`` (that draw) and ``z_BA`` (the normals of ``blr.target = sample``) are
+        ``w_online_AD`` (that draw) and ``z_BAD`` (the normals of ``blr.target = sample``) are
         drawn here unless given (:meth:`_draws`, for the captured update); ``phi_next_target``
         (the target features of s', from the target cache) likewise."""
         if phi_next_target is None:
@@ -230,7 +230,7 @@ class FarsighterAgent:
         q_next_online = phi_next @ w_online_AD.T
         q_next_target = phi_next_target @ self.target_mean_AD.T
         if self.cfg.blr.target == "sample":
-            noise_BA = self.head.q_noise(phi_next_target, generator=self.gen, z_BA=z_BA)
+            noise_BA = self.head.q_noise(phi_next_target, generator=self.gen, z_BAD=z_BAD)
             q_next_online = q_next_online + noise_BA
             q_next_target = q_next_target + noise_BA
         return double_q_target(t.returns_B, t.bootstrap_B, q_next_online, q_next_target)
@@ -293,9 +293,9 @@ class FarsighterAgent:
             return {"w_online_AD": self.exploration.acting_draw(self.gen)}
         if target != "sample":
             return {}
-        draws = {"z_BA": self.head.noise_z(rows, self.gen)}
+        draws = {"z_BAD": self.head.noise_z(rows, self.gen)}
         if one_step:
-            draws["one_z_BA"] = self.head.noise_z(rows, self.gen)
+            draws["one_z_BAD"] = self.head.noise_z(rows, self.gen)
         return draws
 
     def _step(self, inputs: Tensors) -> Tensors:
@@ -303,7 +303,7 @@ class FarsighterAgent:
         target, the loss at the posterior mean, and the optimizer step on theta."""
         t = TensorBatch.of(inputs)
         w = inputs.get("w_online_AD")
-        y_B = self._targets(t, w, inputs.get("z_BA"), inputs.get("phi_next_target_BD"))
+        y_B = self._targets(t, w, inputs.get("z_BAD"), inputs.get("phi_next_target_BD"))
         if "one_next_obs_B" in inputs:  # k_target = max
             one = TensorBatch(
                 obs_B=t.obs_B,
@@ -314,7 +314,9 @@ class FarsighterAgent:
             )
             y_B = torch.maximum(
                 y_B,
-                self._targets(one, w, inputs.get("one_z_BA"), inputs.get("one_phi_next_target_BD")),
+                self._targets(
+                    one, w, inputs.get("one_z_BAD"), inputs.get("one_phi_next_target_BD")
+                ),
             )
         phi_BD = self.torso(t.obs_B)
         q_B = (phi_BD @ self.head.mean_AD.T).gather(1, t.actions_B[:, None])[:, 0]

@@ -451,24 +451,36 @@ class BLRHead:
         self,
         phi_BD: torch.Tensor,
         generator: torch.Generator | None = None,
-        z_BA: torch.Tensor | None = None,
+        z_BAD: torch.Tensor | None = None,
     ) -> torch.Tensor:
-        """The random part of ``q_sample``, shape (B, A): for every row and action an independent
-        draw of sqrt(cov_scale) phi^T U_a z with z ~ N(0, I_d). That is a zero-mean normal of
-        variance ``predictive_var`` (phi^T U_a z is a sum of independent normals of variances
-        (U_a^T phi)_i^2), so it is drawn as sqrt(predictive_var) times one standard normal per
-        row and action: the same distribution from A normals a row instead of A d (a target over
-        a minibatch of 64 with d = 128 drew 16k normals a pass). ``z_BA`` gives the standard
+        """The random part of ``q_sample``: sqrt(cov_scale) phi^T U_a z with a fresh z per row and
+        action, shape (B, A); its variance is ``predictive_var``. ``z_BAD`` gives the standard
         normals (:meth:`noise_z` draws the same ones from the same generator state), so that a
         captured CUDA graph can take them as an input."""
-        var_BA = self.predictive_var(phi_BD)
-        if z_BA is None:
-            z_BA = self.noise_z(var_BA.shape[0], generator)
-        return var_BA.sqrt() * z_BA
+        phi_BD = self._phi32(phi_BD)
+        a, d = self.num_actions, self.dim
+        noise_BA = torch.empty(phi_BD.shape[0], a, dtype=torch.float32, device=self.device)
+        scale = math.sqrt(self.cov_scale)
+        step = self._block_rows()
+        for lo in range(0, phi_BD.shape[0], step):
+            phiu_KAD = (phi_BD[lo : lo + step] @ self._sqrt_cov32_DX).view(-1, a, d)
+            if z_BAD is None:
+                z_KAD = self._normals(phiu_KAD.shape[0], generator)
+            else:
+                z_KAD = z_BAD[lo : lo + step]
+            noise_BA[lo : lo + step] = scale * (phiu_KAD * z_KAD).sum(-1)
+        return noise_BA
 
     def noise_z(self, rows: int, generator: torch.Generator | None = None) -> torch.Tensor:
-        """The standard normals ``q_noise`` draws for ``rows`` rows, shape (rows, A)."""
-        shape = (rows, self.num_actions)
+        """The standard normals ``q_noise`` draws for ``rows`` rows, shape (rows, A, D), drawn block
+        by block as it draws them (the same numbers from the same generator state)."""
+        step = self._block_rows()
+        blocks = [self._normals(min(step, rows - lo), generator) for lo in range(0, rows, step)]
+        return blocks[0] if len(blocks) == 1 else torch.cat(blocks)
+
+    def _normals(self, rows: int, generator: torch.Generator | None) -> torch.Tensor:
+        """One block of standard normals, shape (rows, A, D)."""
+        shape = (rows, self.num_actions, self.dim)
         return torch.randn(shape, generator=generator, device=self.device, dtype=torch.float32)
 
     @torch.no_grad()
