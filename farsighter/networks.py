@@ -72,14 +72,13 @@ class MLPTorso(Torso):
             last = size
         self.net = nn.Sequential(*layers)
         self.out_dim = last
-        self._linears = [m for m in layers if isinstance(m, nn.Linear)]
         self._cache_params()
 
     def _cache_params(self) -> None:
         # The layers' (weight, bias) tensors, read without a module attribute lookup each. The
         # optimizer and load_state_dict write into these tensors; a move (.to, .cuda, .float)
         # may replace them, so _apply takes them again.
-        self._params = [(m.weight, m.bias) for m in self._linears]
+        self._params = [(m.weight, m.bias) for m in self.net if isinstance(m, nn.Linear)]
 
     def _apply(self, fn: Any, recurse: bool = True) -> MLPTorso:
         super()._apply(fn, recurse)

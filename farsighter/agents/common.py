@@ -246,7 +246,7 @@ class RecentRows:
 
     def rows(self) -> torch.Tensor | None:
         """The rows kept, oldest first (None before any was added)."""
-        if self.buf is None or self.added == 0:
+        if self.buf is None:  # allocated by the first add of a row
             return None
         if self.added < self.keep:
             return self.buf[: self.added]

@@ -128,11 +128,8 @@ class ThompsonExploration:
             if self.keep_acting_draw:
                 self.w_EAD = w_EAD.clone()  # not a view: the block is replaced, w_EAD saved
             return _q_under(phi_ED, w_EAD)
-        due = self.schedule.due(obs_E, self.counters, held=self.w_EAD is not None)
-        if self.w_EAD is None or due is True:
-            self.redraw_E[:] = True
-        elif due is not False:
-            self.redraw_E |= due
+        # (no draw held yet, or held for other environments: all are drawn below)
+        self.redraw_E |= self.schedule.due(obs_E, self.counters, held=self.w_EAD is not None)
         if self.w_EAD is None or self.w_EAD.shape[0] != n:
             self.w_EAD = self.head.sample_weights(n, generator=gen)
             self.counters.draws += n
@@ -147,9 +144,7 @@ class ThompsonExploration:
     def observe(self, done_E: np.ndarray) -> None:
         """Episodes that ended at this step (terminated or truncated)."""
         if self.schedule is not None:
-            ended = self.schedule.ended(done_E)
-            if ended is not False:
-                self.redraw_E |= ended
+            self.redraw_E |= self.schedule.ended(done_E)
 
     def acting_draw(self, gen: torch.Generator) -> torch.Tensor:
         """The weights (A, D) of the latest acting draw (environment 0), for blr.target =
