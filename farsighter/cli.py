@@ -16,7 +16,7 @@ from typing import Annotated
 import tyro
 
 from farsighter.config import Config, load_config, make_config, resolve_preset_name
-from farsighter.errors import FarsighterError, RunDirError
+from farsighter.errors import ConfigError, FarsighterError, RunDirError
 from farsighter.rundir import CONFIG_FILE, check_same_run
 
 USAGE = """usage: farsighter <command> [options]
@@ -36,6 +36,8 @@ commands:
             farsighter sweep benchmarks/sweeps/k-study.toml [--ray [--address ADDR]]
   train     train an agent:   farsighter train --algo farsighter --env CartPole-v1 [--help]
             continue a run:   farsighter train --run-dir DIR --resume [--total-steps N]
+            several seeds:    farsighter train --algo ddqn --seeds 1 2 3 4  (one process;
+                              batched where the agent allows it, each seed its own run dir)
   eval      evaluate a run:   farsighter eval RUN_DIR [--episodes 10]
   plot      draw a run's learning curve:  farsighter plot RUN_DIR
   presets   list the named presets and their sources
@@ -125,11 +127,44 @@ def train_config(argv: Sequence[str]) -> Config:
     return cfg
 
 
+def split_seeds(argv: Sequence[str]) -> tuple[list[str], list[int] | None]:
+    """``argv`` without ``--seeds N [N ...]``, and those seeds (None when not given)."""
+    args = list(argv)
+    if "--seeds" not in args:
+        return args, None
+    at = args.index("--seeds")
+    end = at + 1
+    while end < len(args) and not args[end].startswith("--"):
+        end += 1
+    values = args[at + 1 : end]
+    bad = [v for v in values if not v.lstrip("-").isdigit()]
+    if bad or not values:
+        raise ConfigError(
+            f"--seeds takes one or more whole numbers (got {' '.join(values) or 'none'})"
+        )
+    return args[:at] + args[end:], [int(v) for v in values]
+
+
 def cmd_train(argv: Sequence[str]) -> int:
+    from farsighter.seeds import seed_configs, train_seeds
     from farsighter.train import train
 
-    summary = train(train_config(argv))
-    print(json.dumps(summary, indent=2))
+    rest, seeds = split_seeds(argv)
+    if seeds is None:
+        summary = train(train_config(rest))
+        print(json.dumps(summary, indent=2))
+        return 0
+    lead, _ = tyro.cli(TrainLead, args=_without_help(rest), return_unknown_args=True)
+    if lead.resume:  # each seed's saved config, from its own directory
+        dirs = [c.run_dir for c in seed_configs(Config(run_dir=lead.run_dir), seeds)]
+        cfgs = [
+            train_config([*rest, "--seed", str(s), *(["--run-dir", d] if d else [])])
+            for s, d in zip(seeds, dirs, strict=True)
+        ]
+    else:
+        cfgs = seed_configs(train_config(rest), seeds)
+    summaries = train_seeds(cfgs)
+    print(json.dumps(summaries, indent=2))
     return 0
 
 

@@ -177,6 +177,14 @@ def td_loss(pred_B: torch.Tensor, target_B: torch.Tensor, kind: str) -> torch.Te
     return torch.nn.functional.smooth_l1_loss(pred_B, target_B)
 
 
+def elementwise_td_loss(pred: torch.Tensor, target: torch.Tensor, kind: str) -> torch.Tensor:
+    """:func:`td_loss` before its mean, per element (the seed-batched agents take each seed's
+    mean themselves)."""
+    if kind == "mse":
+        return torch.nn.functional.mse_loss(pred, target, reduction="none")
+    return torch.nn.functional.smooth_l1_loss(pred, target, reduction="none")
+
+
 def clip_and_step(
     loss: torch.Tensor, params: list[nn.Parameter], opt: torch.optim.Optimizer, max_norm: float
 ) -> None:

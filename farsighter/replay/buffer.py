@@ -203,16 +203,30 @@ class ReplayBuffer:
         final_obs_E: np.ndarray | list[Any] | None = None,
     ) -> None:
         """Append one step of every stream. ``final_obs_E[e]`` is the last observation of an
-        episode that ended at this step (needed for truncations; stored for terminations too)."""
-        for e in range(self.num_envs):
-            term, trunc = bool(terminated_E[e]), bool(truncated_E[e])
-            flag = (TERMINATED if term else 0) | (TRUNCATED if trunc else 0)
-            self._write(e, self._frame(obs_E[e]), action_E[e], float(reward_E[e]), int(flag))
-            if term or trunc:
-                if final_obs_E is None or final_obs_E[e] is None:
-                    raise ValueError("final_obs_E is required for streams whose episode ended")
-                self._write(e, self._frame(np.asarray(final_obs_E[e])), 0, 0.0, int(FINAL))
-                self.episode_t[e] = 0
+        episode that ended at this step (needed for truncations; stored for terminations too).
+
+        Every stream's row is written in one array operation, then the final rows of the streams
+        whose episode ended (the streams' rows are disjoint, so this order stores what writing
+        stream after stream stores)."""
+        term_E = np.asarray(terminated_E, dtype=bool).reshape(self.num_envs)
+        trunc_E = np.asarray(truncated_E, dtype=bool).reshape(self.num_envs)
+        e_E = np.arange(self.num_envs)
+        slot_E = self.count % self.capacity
+        obs = np.asarray(obs_E)
+        self.frames[e_E, slot_E] = obs[:, -1] if self.frame_stack > 1 else obs
+        self.actions[e_E, slot_E] = action_E
+        self.rewards[e_E, slot_E] = np.asarray(reward_E, dtype=np.float64)
+        self.flags[e_E, slot_E] = np.where(term_E, TERMINATED, 0) | np.where(trunc_E, TRUNCATED, 0)
+        self.t_ep[e_E, slot_E] = self.episode_t
+        if self.mirror is not None:
+            self._written.extend((e_E * self.capacity + slot_E).tolist())
+        self.count += 1
+        self.episode_t += 1
+        for e in np.flatnonzero(term_E | trunc_E):
+            if final_obs_E is None or final_obs_E[e] is None:
+                raise ValueError("final_obs_E is required for streams whose episode ended")
+            self._write(int(e), self._frame(np.asarray(final_obs_E[e])), 0, 0.0, int(FINAL))
+            self.episode_t[e] = 0
         if self._written:
             self._to_mirror(np.asarray(self._written, dtype=np.int64))
             self._written.clear()

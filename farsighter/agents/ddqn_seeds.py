@@ -1,0 +1,273 @@
+"""DDQN and k-DDQN for S seeds at once: :class:`farsighter.agents.ddqn.DDQNAgent`'s math on
+networks with a seed axis (:mod:`farsighter.stacked`), so that one forward pass acts for every
+seed and one backward pass updates them all.
+
+Each seed keeps what makes it that seed: its initial weights (built under its seed), its replay
+and the replay's generator (seed + 1), its epsilon-greedy generator (seed + 2). Its losses,
+gradients, gradient clipping and optimizer steps are its own, so on CPU each seed trains bit for
+bit as ``DDQNAgent`` trains it alone (``tests/test_seeds.py``). :meth:`member` is one seed seen
+as an agent (evaluation, diagnostics, checkpoints), and its checkpoint is the one the run alone
+writes: a seed started in a batch can be resumed alone, and the other way round.
+"""
+
+from __future__ import annotations
+
+import copy
+import dataclasses
+from collections.abc import Sequence
+from typing import Any
+
+import gymnasium as gym
+import numpy as np
+import torch
+
+from farsighter.agents.common import (
+    Counters,
+    batch_tensors,
+    build_seeded,
+    elementwise_td_loss,
+    linear_schedule,
+    make_optimizer,
+    row_bytes,
+    sync_target,
+    updates_owed,
+    uses_gpu_replay,
+)
+from farsighter.config import Config
+from farsighter.networks import QNetwork
+from farsighter.ops.targets import double_q_target
+from farsighter.replay import VectorStep
+from farsighter.replay.seeds import SeedReplay
+from farsighter.stacked import (
+    StackedQNetwork,
+    load_member_optimizer_state,
+    member_optimizer_state,
+    stackable,
+)
+
+
+def supports(cfg: Config, obs_space: gym.Space, device: torch.device) -> str:
+    """Why ``cfg`` cannot train as a seed batch here ('' when it can)."""
+    if cfg.algo not in ("ddqn", "kddqn"):
+        return f"{cfg.algo} trains its seeds one at a time (batched: ddqn, kddqn)"
+    if not isinstance(obs_space, gym.spaces.Box) or len(obs_space.shape or ()) == 3:
+        return "image observations train their seeds one at a time (batched: flat observations)"
+    if cfg.precision != "fp32" or cfg.compile or cfg.cuda_graph == "on":
+        return "precision bf16, compile and cuda_graph train their seeds one at a time"
+    return ""
+
+
+class SeedBatchDDQN:
+    """S DDQN agents of one config (``cfgs`` differ only in seed) as one computation."""
+
+    def __init__(
+        self,
+        cfgs: Sequence[Config],
+        obs_space: gym.spaces.Box,
+        act_space: gym.spaces.Discrete,
+        *,
+        device: torch.device,
+    ) -> None:
+        cfg = self.cfg = cfgs[0]
+        self.cfgs, self.device, self.num_actions = list(cfgs), device, int(act_space.n)
+        nets = [
+            build_seeded(c.seed, lambda: QNetwork(obs_space, self.num_actions, cfg.hidden_sizes))
+            for c in cfgs
+        ]
+        if not all(stackable(net) for net in nets):
+            raise ValueError("SeedBatchDDQN needs fp32 MLP Q-networks")
+        self.q = StackedQNetwork(nets).to(device)
+        self.q_target = copy.deepcopy(self.q)
+        self.q_target.requires_grad_(False)
+        self.params = list(self.q.parameters())
+        self.opt = make_optimizer(self.params, cfg)
+        self.replay = SeedReplay(  # each seed's streams and generator (seed + 1), as alone
+            [c.seed + 1 for c in cfgs],
+            cfg.buffer_size,
+            tuple(obs_space.shape or ()),
+            obs_space.dtype,
+            num_envs=cfg.num_envs,
+            action_dtype=np.int32,
+            device=device
+            if uses_gpu_replay(cfg, device, row_bytes(obs_space, 1) * len(cfgs))
+            else None,
+        )
+        self.rngs = [np.random.default_rng(c.seed + 2) for c in cfgs]
+        self.counters = Counters(k=cfg.k)  # one schedule: the seeds step together
+        self.epsilon = cfg.eps_start
+        self.last_loss_SB: torch.Tensor | None = None  # each seed's elementwise TD loss
+
+    @property
+    def seeds(self) -> int:
+        return len(self.cfgs)
+
+    # ------------------------------------------------------------------ acting
+    def greedy(self, obs_SE: np.ndarray) -> np.ndarray:
+        """argmax_a Q(s, a) of every seed's networks on its own observations, (S, E)."""
+        with torch.inference_mode():
+            obs = torch.as_tensor(np.asarray(obs_SE)).to(self.device)
+            return self.q(obs).argmax(dim=2).cpu().numpy()
+
+    def act(self, obs_SE: np.ndarray, global_step: int) -> np.ndarray:
+        """Each seed's epsilon-greedy actions from its own generator, (S, E)."""
+        cfg = self.cfg
+        self.epsilon = linear_schedule(cfg.eps_start, cfg.eps_end, cfg.eps_decay_steps, global_step)
+        greedy_SE = self.greedy(obs_SE)  # draws nothing: the generators see what they see alone
+        n = obs_SE.shape[1]
+        # epsilon_greedy's draws, seed by seed from its own generator: the coins, then the actions
+        draws = [(rng.random(n), rng.integers(0, self.num_actions, size=n)) for rng in self.rngs]
+        random_SE = np.stack([coins for coins, _ in draws]) < self.epsilon
+        return np.where(random_SE, np.stack([actions for _, actions in draws]), greedy_SE)
+
+    def observe(self, steps: Sequence[VectorStep]) -> None:
+        """One vector step of every seed, in seed order, into the seeds' streams."""
+        final = [None if st.final_obs_E is None else list(st.final_obs_E) for st in steps]
+        ended = any(f is not None for f in final)
+        self.replay.add(
+            np.concatenate([st.obs_E for st in steps]),
+            np.concatenate([st.action_E for st in steps]),
+            np.concatenate([st.reward_E for st in steps]),
+            np.concatenate([st.terminated_E for st in steps]),
+            np.concatenate([st.truncated_E for st in steps]),
+            [
+                o
+                for st, f in zip(steps, final, strict=True)
+                for o in (f or [None] * len(st.reward_E))
+            ]
+            if ended
+            else None,
+        )
+
+    # ------------------------------------------------------------------ learning
+    def learn(self, global_step: int) -> None:
+        for _ in range(updates_owed(self.counters, self.cfg, global_step)):
+            self.last_loss_SB = self.update()
+        sync_target(
+            self.counters, global_step, self.cfg.target_update_every, (self.q, self.q_target)
+        )
+
+    def update(self) -> torch.Tensor:
+        """One gradient step of every seed on its own double-Q minibatch; the elementwise TD
+        losses, (S, B)."""
+        cfg, k, S = self.cfg, self.counters.k, self.seeds
+        batch = self.replay.sample_seeds(
+            cfg.batch_size,
+            k=k,
+            gamma=cfg.gamma,
+            recent=cfg.effective_recent_window if cfg.sample_recent else None,
+            stride=k if cfg.stride else 1,
+            on_device=True,
+        )
+        t = batch_tensors(batch, self.device)
+
+        def by_seed(x: torch.Tensor) -> torch.Tensor:
+            return x.view(S, cfg.batch_size, *x.shape[1:])
+
+        q_SB = self.q(by_seed(t.obs_B)).gather(2, by_seed(t.actions_B).unsqueeze(2)).squeeze(2)
+        with torch.no_grad():  # Eq. 2 with k-step returns, each seed's rows as its own
+            next_obs = by_seed(t.next_obs_B)
+            q_next_online, q_next_target = self.q(next_obs), self.q_target(next_obs)
+            y_SB = double_q_target(
+                t.returns_B, t.bootstrap_B, q_next_online.flatten(0, 1), q_next_target.flatten(0, 1)
+            ).view(S, -1)
+        loss_SB = elementwise_td_loss(q_SB, y_SB, cfg.loss)
+        self.opt.zero_grad(set_to_none=True)
+        # The sum of the seeds' mean losses: each seed's gradient is its own loss's, with the
+        # 1/B of the mean applied where F.smooth_l1_loss / F.mse_loss apply it alone.
+        loss_SB.mean(1).sum().backward()
+        if cfg.max_grad_norm > 0:
+            self._clip(cfg.max_grad_norm)
+        self.opt.step()
+        return loss_SB.detach()
+
+    def _clip(self, max_norm: float) -> None:
+        """Each seed's gradients clipped by its own total norm, as
+        :func:`farsighter.agents.common.clip_gradients` clips them alone: the norm of each
+        seed's slice of each gradient, their norm per seed, and a factor of 1 (exact) for the
+        seeds under the limit."""
+        grads = [p.grad for p in self.params if p.grad is not None]
+        S = self.seeds
+        norms = torch._foreach_norm([g[s] for s in range(S) for g in grads])
+        total_S = torch.stack(
+            [
+                torch.linalg.vector_norm(torch.stack(norms[s * len(grads) : (s + 1) * len(grads)]))
+                for s in range(S)
+            ]
+        )
+        coef_S = max_norm / (total_S + 1e-6)
+        coef_S = torch.where(coef_S < 1.0, coef_S, torch.ones_like(coef_S))
+        torch._foreach_mul_(grads, [coef_S.view(S, *[1] * (g.dim() - 1)) for g in grads])
+
+    # ------------------------------------------------------------------ one seed
+    def member(self, s: int) -> SeedMember:
+        return SeedMember(self, s)
+
+
+class SeedMember:
+    """Seed ``s`` of a batch as an agent: what the run log, evaluation and checkpoints use."""
+
+    SAVED = ("q", "q_target", "opt", "rng", "counters")  # DDQNAgent's checkpoint keys
+
+    def __init__(self, batch: SeedBatchDDQN, s: int) -> None:
+        self.batch, self.s = batch, s
+        self.cfg = batch.cfgs[s]
+
+    def act(self, obs_E: np.ndarray, global_step: int, explore: bool = True) -> np.ndarray:
+        if explore:
+            raise NotImplementedError("a seed of a batch explores through the batch's act")
+        return self.greedy(obs_E)
+
+    def greedy(self, obs_E: np.ndarray) -> np.ndarray:
+        """argmax_a Q(s, a) under this seed's network alone (its slice of the batch's)."""
+        b = self.batch
+        with torch.inference_mode():
+            obs = torch.as_tensor(np.asarray(obs_E)).to(b.device).unsqueeze(0)
+            return b.q(obs, slice(self.s, self.s + 1)).argmax(dim=2)[0].cpu().numpy()
+
+    @torch.no_grad()
+    def q_estimate(self, obs_B: np.ndarray) -> tuple[np.ndarray, np.ndarray | None]:
+        b = self.batch
+        obs = torch.as_tensor(np.asarray(obs_B)).to(b.device).unsqueeze(0)
+        return b.q(obs, slice(self.s, self.s + 1))[0].cpu().numpy(), None
+
+    def observe(self, step: VectorStep) -> None:
+        raise NotImplementedError("a seed of a batch records its steps through the batch")
+
+    def learn(self, global_step: int) -> dict[str, torch.Tensor]:
+        raise NotImplementedError("a seed of a batch learns through the batch")
+
+    def diagnostics(self) -> dict[str, float]:
+        return {"epsilon": self.batch.epsilon, "k": float(self.batch.counters.k)}
+
+    def latest_loss(self) -> torch.Tensor | None:
+        """The TD loss of this seed's latest update (its mean taken as td_loss takes it alone)."""
+        losses = self.batch.last_loss_SB
+        return None if losses is None else losses[self.s].mean()
+
+    def state_dict(self, include_replay: bool = True) -> dict[str, Any]:
+        """The checkpoint of ``DDQNAgent`` alone, for this seed."""
+        b, s = self.batch, self.s
+        return {
+            "q": b.q.member_state(s),
+            "q_target": b.q_target.member_state(s),
+            "opt": member_optimizer_state(b.opt, s),
+            "rng": b.rngs[s].bit_generator.state,
+            "counters": dataclasses.asdict(b.counters),
+            "replay": b.replay.member_state(s) if include_replay else None,
+        }
+
+    def load_state_dict(self, state: dict[str, Any]) -> None:
+        """A checkpoint of this seed (written alone or in a batch). Seeds resume together only
+        from checkpoints with the same counters (:func:`farsighter.seeds.train_seeds` groups
+        them so)."""
+        b, s = self.batch, self.s
+        b.q.load_member(s, state["q"])
+        b.q_target.load_member(s, state["q_target"])
+        load_member_optimizer_state(b.opt, s, state["opt"])
+        b.rngs[s].bit_generator.state = state["rng"]
+        for key, value in state["counters"].items():  # equal for every seed of a batch
+            setattr(b.counters, key, value)
+        if state.get("replay") is not None:
+            b.replay.load_member(s, state["replay"])
+        else:
+            b.counters.hold_pending = True

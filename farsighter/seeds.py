@@ -1,0 +1,196 @@
+"""Several seeds of one config in one process, as one batched computation.
+
+``farsighter train --seeds 1 2 ... S`` trains S independent runs. Where the agent has a seed-batched
+form (:func:`farsighter.agents.ddqn_seeds.supports`) they train together: one forward pass acts
+for every seed, one backward pass updates them all, and the loop below steps each seed's own
+environments, replay and run log in turn. Elsewhere the seeds train one after another through
+:func:`farsighter.train.train`. Either way each seed is an ordinary run:
+
+* its own run directory (``runs/<env>__<algo>__s<seed>``, or ``RUN_DIR/s<seed>`` under a given
+  ``--run-dir``), with the files, checkpoints and summary a run alone writes;
+* on CPU the same numbers as the run alone, bit for bit (``tests/test_seeds.py``);
+* resumable alone or in a batch: a checkpoint has the layout of the run alone, and a batch
+  resumes its seeds in groups that stopped at the same step (a kill between two seeds' saves
+  leaves them at different steps; each group then continues from its own).
+
+This module is the loop of :func:`farsighter.train.train` with a seed axis; what it does per step
+and per seed (logging, evaluation, checkpoints) is :mod:`farsighter.session`'s, unchanged.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+from collections.abc import Sequence
+from pathlib import Path
+from typing import Any
+
+import gymnasium as gym
+import numpy as np
+import torch
+from tqdm import tqdm
+
+from farsighter.agents.ddqn_seeds import SeedBatchDDQN, supports
+from farsighter.config import Config, validate
+from farsighter.envs import check_spaces, make_vector_env
+from farsighter.errors import ConfigError
+from farsighter.replay import VectorStep
+from farsighter.rundir import check_same_run, load_checkpoint, prepare_run_dir
+from farsighter.runtime import prepare_process
+from farsighter.session import (
+    LoopState,
+    RunLog,
+    final_observations,
+    passed_multiple,
+    restore_run,
+    save_run,
+)
+
+__all__ = ["seed_configs", "train_seeds"]
+
+
+def seed_configs(cfg: Config, seeds: Sequence[int]) -> list[Config]:
+    """``cfg`` once per seed, each with its own run directory: the default one of its seed, or
+    ``cfg.run_dir/s<seed>`` when ``cfg.run_dir`` is given."""
+    if not seeds:
+        raise ConfigError("--seeds needs at least one seed")
+    if len(set(seeds)) != len(seeds):
+        raise ConfigError(f"--seeds lists a seed twice: {list(seeds)}; give each seed once")
+    return [
+        dataclasses.replace(
+            cfg, seed=int(s), run_dir=str(Path(cfg.run_dir) / f"s{s}") if cfg.run_dir else ""
+        )
+        for s in seeds
+    ]
+
+
+def train_seeds(cfgs: Sequence[Config], batched: bool = True) -> list[dict[str, Any]]:
+    """Train each config (one per seed; :func:`seed_configs`) and return their summaries, in
+    order. Seeds whose configs agree outside seed and run directory, that resume from the same
+    point and whose agent allows it, train as one batch; the others (and all of them with
+    ``batched=False``) train alone, one after another."""
+    from farsighter.train import resolve_device, train
+
+    for cfg in cfgs:
+        check_same_run(cfg)
+        validate(cfg)
+    summaries: dict[int, dict[str, Any]] = {}
+    for group in _groups(cfgs) if batched else [[c] for c in cfgs]:
+        reason = _batch_refusal(group[0], resolve_device(group[0].device)) if len(group) > 1 else ""
+        if reason or len(group) == 1:
+            for cfg in group:
+                summaries[cfg.seed] = train(cfg)
+            continue
+        for summary in _train_batch(group, resolve_device(group[0].device)):
+            summaries[summary["seed"]] = summary
+    return [summaries[cfg.seed] for cfg in cfgs]
+
+
+def _groups(cfgs: Sequence[Config]) -> list[list[Config]]:
+    """Seeds that can share a batch: the same config but for seed and run directory, starting
+    from the same step with the same counters (a fresh start, or equal checkpoints)."""
+    groups: dict[Any, list[Config]] = {}
+    for cfg in cfgs:
+        key = (dataclasses.replace(cfg, seed=0, run_dir=""), _start_point(cfg))
+        groups.setdefault(key, []).append(cfg)
+    return list(groups.values())
+
+
+def _start_point(cfg: Config) -> Any:
+    if not cfg.resume:
+        return None
+    checkpoint = load_checkpoint(cfg.resolved_run_dir)
+    counters = checkpoint["agent"].get("counters", {})
+    return checkpoint["loop"]["global_step"], tuple(sorted(counters.items()))
+
+
+def _batch_refusal(cfg: Config, device: torch.device) -> str:
+    probe = make_vector_env(cfg, seed=cfg.seed)
+    try:
+        check_spaces(cfg.algo, probe.single_observation_space, probe.single_action_space)
+        return supports(cfg, probe.single_observation_space, device)
+    finally:
+        probe.close()
+
+
+@dataclasses.dataclass
+class _Seed:
+    """One seed's part of the loop: what ``train`` holds for a run alone."""
+
+    cfg: Config
+    path: Path
+    envs: Any
+    obs: Any
+    state: LoopState
+    log: RunLog
+
+
+def _train_batch(cfgs: Sequence[Config], device: torch.device) -> list[dict[str, Any]]:
+    cfg = cfgs[0]
+    envs = [make_vector_env(c, seed=c.seed) for c in cfgs]
+    obs_space, act_space = envs[0].single_observation_space, envs[0].single_action_space
+    assert isinstance(obs_space, gym.spaces.Box) and isinstance(act_space, gym.spaces.Discrete)
+    paths = [prepare_run_dir(c) for c in cfgs]
+    prepare_process(cfg.torch_threads)
+    batch = SeedBatchDDQN(cfgs, obs_space, act_space, device=device)
+    members = [batch.member(s) for s in range(len(cfgs))]
+    runs: list[_Seed] = []
+    for c, path, env, member in zip(cfgs, paths, envs, members, strict=True):
+        if c.resume:
+            state, env, obs = restore_run(path, c, member, env)
+        else:
+            state, (obs, _) = LoopState(), env.reset(seed=c.seed)
+        quiet = dataclasses.replace(c, progress=False)  # one bar for the batch, below
+        runs.append(_Seed(c, path, env, obs, state, RunLog(path, quiet, state, resumed=c.resume)))
+    step = runs[0].state.global_step
+    bar = tqdm(
+        total=cfg.total_steps * len(runs),
+        initial=step * len(runs),
+        unit="step",
+        disable=not cfg.progress,
+        dynamic_ncols=True,
+        mininterval=1.0,
+        desc=f"{cfg.algo} {cfg.env} {len(runs)} seeds",
+    )
+    try:
+        while step < cfg.total_steps:
+            actions_SE = batch.act(np.stack([run.obs for run in runs]), step)
+            prev, step = step, step + cfg.num_envs
+            infos, vector_steps = [], []
+            for run, actions in zip(runs, actions_SE, strict=True):
+                next_obs, rewards, terminated, truncated, info = run.envs.step(actions)
+                final = final_observations(info, cfg.num_envs)
+                vector_steps.append(
+                    VectorStep(run.obs, actions, rewards, terminated, truncated, final)
+                )
+                run.obs = next_obs
+                infos.append(info)
+            batch.observe(vector_steps)
+            batch.learn(step)
+            for run, member, info in zip(runs, members, infos, strict=True):
+                run.state.global_step = step
+                loss = member.latest_loss()
+                run.log.step(run.state, info, {} if loss is None else {"td_loss": loss}, member)
+                if passed_multiple(prev, step, cfg.eval_every):
+                    run.log.evaluate(run.state, member)
+                if passed_multiple(prev, step, cfg.checkpoint_every) and step < cfg.total_steps:
+                    save_run(run.path, run.cfg, run.state, member, run.envs, run.obs)
+            bar.update(cfg.num_envs * len(runs))
+        return [_finish(run, member) for run, member in zip(runs, members, strict=True)]
+    finally:
+        bar.close()
+        for run in runs:
+            run.log.close()
+            run.envs.close()
+
+
+def _finish(run: _Seed, member: Any) -> dict[str, Any]:
+    """What ``train`` does after its last step, for one seed."""
+    from farsighter.train import POLICY_FILE
+
+    state, cfg = run.state, run.cfg
+    run.log.end_of_training()
+    if state.evals == 0 or (cfg.eval_every and state.global_step % cfg.eval_every):
+        run.log.evaluate(state, member)
+    save_run(run.path, cfg, state, member, run.envs, run.obs)
+    torch.save(member.state_dict(include_replay=False), run.path / POLICY_FILE)
+    return run.log.summary(state)

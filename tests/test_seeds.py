@@ -1,0 +1,230 @@
+"""Seeds in one process (issue #27 item 2): a seed trained in a batch is the run it is alone.
+
+Every claim of :mod:`farsighter.seeds` is checked against :func:`farsighter.train.train` run
+alone on the same config and seed: the weights, the optimizer state, the generators, the counters
+and the logged files, bit for bit on CPU; a checkpoint that moves between the two; and the pieces
+(the batched linear layer, the seed replay) against what they replace.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+import pytest
+import torch
+import torch.nn.functional as F
+
+from farsighter.cli import main
+from farsighter.errors import ConfigError
+from farsighter.replay import ReplayBuffer
+from farsighter.replay.seeds import SeedReplay
+from farsighter.seeds import seed_configs, train_seeds
+from farsighter.stacked import StackedLinear
+from farsighter.train import train
+
+SEEDS = (3, 5, 8)
+
+
+def _same_checkpoints(alone: dict[str, Any], batch: dict[str, Any]) -> None:
+    for net in ("q", "q_target"):
+        assert alone[net].keys() == batch[net].keys()
+        for name in alone[net]:
+            assert torch.equal(alone[net][name], batch[net][name]), (net, name)
+    assert alone["opt"]["state"].keys() == batch["opt"]["state"].keys()
+    for index, entry in alone["opt"]["state"].items():
+        for key, value in entry.items():
+            assert torch.equal(value, batch["opt"]["state"][index][key]), (index, key)
+    assert alone["rng"] == batch["rng"]
+    assert alone["counters"] == batch["counters"]
+
+
+def _files(run: Path) -> dict[str, list[str]]:
+    """The logged rows without the wall-clock columns (SPS differs between any two runs)."""
+    out = {}
+    for name in ("metrics.csv", "eval.csv"):
+        rows = (run / name).read_text().splitlines()
+        header = rows[0].split(",")
+        keep = [i for i, col in enumerate(header) if col != "SPS"]
+        out[name] = [",".join(row.split(",")[i] for i in keep) for row in rows]
+    return out
+
+
+@pytest.mark.parametrize(
+    ("env", "values"),
+    [
+        ("CartPole-v1", {}),
+        # k-step returns, a loss and clipping that bite, the RMSProp of Table 1, two envs a seed
+        (
+            "CartPole-v1",
+            {"k": 3, "loss": "mse", "max_grad_norm": 0.5, "optimizer": "rmsprop", "num_envs": 2},
+        ),
+        ("farsighter/DeepSea6-v0", {"batch_size": 24}),
+    ],
+)
+def test_a_seed_in_a_batch_trains_as_it_does_alone(
+    tmp_path: Path, tiny_config: Any, env: str, values: dict[str, Any]
+) -> None:
+    cfg = tiny_config("ddqn", tmp_path / "batch", env=env, **values)
+    summaries = train_seeds(seed_configs(cfg, SEEDS))
+    assert [s["seed"] for s in summaries] == list(SEEDS)
+    for seed in (SEEDS[0], SEEDS[-1]):
+        alone_dir = tmp_path / f"alone{seed}"
+        train(dataclasses.replace(cfg, seed=seed, run_dir=str(alone_dir)))
+        batch_dir = tmp_path / "batch" / f"s{seed}"
+        for name in ("policy.pt", "checkpoint.pt"):
+            _same_checkpoints(_agent_state(alone_dir / name), _agent_state(batch_dir / name))
+        assert _files(alone_dir) == _files(batch_dir)
+    # the seeds are different runs
+    first = _agent_state(tmp_path / "batch" / f"s{SEEDS[0]}" / "policy.pt")
+    second = _agent_state(tmp_path / "batch" / f"s{SEEDS[1]}" / "policy.pt")
+    assert not torch.equal(first["q"]["head.weight"], second["q"]["head.weight"])
+
+
+def _agent_state(path: Path) -> dict[str, Any]:
+    state = torch.load(path, weights_only=False)
+    return state["agent"] if "agent" in state else state
+
+
+def test_a_batch_killed_midway_resumes_in_a_batch_or_alone(
+    tmp_path: Path, tiny_config: Any
+) -> None:
+    """Stopped at 1,000 of 1,500 steps (checkpoints every 500): seed 3 resumed alone and seeds 5
+    and 8 resumed as a batch end where the uninterrupted batch ends, replay included."""
+    full = tiny_config("ddqn", tmp_path / "full", k=2)
+    train_seeds(seed_configs(full, SEEDS))
+    part = dataclasses.replace(full, run_dir=str(tmp_path / "part"), total_steps=1_000)
+    train_seeds(seed_configs(part, SEEDS))
+    resumed = dataclasses.replace(part, total_steps=1_500, resume=True)
+    configs = seed_configs(resumed, SEEDS)
+    train(configs[0])
+    train_seeds(configs[1:])
+    for seed in SEEDS:
+        a = torch.load(tmp_path / "full" / f"s{seed}" / "checkpoint.pt", weights_only=False)
+        b = torch.load(tmp_path / "part" / f"s{seed}" / "checkpoint.pt", weights_only=False)
+        _same_checkpoints(a["agent"], b["agent"])
+        for key, value in a["agent"]["replay"].items():
+            other = b["agent"]["replay"][key]
+            assert value == other if key == "rng" else np.array_equal(value, other), key
+
+
+def test_seeds_at_different_steps_resume_in_groups(tmp_path: Path, tiny_config: Any) -> None:
+    """A kill between two seeds' saves leaves them at different steps: each continues from its
+    own checkpoint, and both end as the uninterrupted runs end."""
+    cfg = tiny_config("ddqn", tmp_path / "runs", total_steps=1_000)
+    short, long_ = (
+        seed_configs(cfg, [3]),
+        seed_configs(dataclasses.replace(cfg, total_steps=1_500), [5]),
+    )
+    train_seeds(short)
+    train_seeds(long_)
+    both = seed_configs(dataclasses.replace(cfg, total_steps=1_500, resume=True), [3, 5])
+    train_seeds(both)
+    full = seed_configs(
+        dataclasses.replace(cfg, total_steps=1_500, run_dir=str(tmp_path / "full")), [3, 5]
+    )
+    train_seeds(full)
+    for seed in (3, 5):
+        _same_checkpoints(
+            _agent_state(tmp_path / "full" / f"s{seed}" / "policy.pt"),
+            _agent_state(tmp_path / "runs" / f"s{seed}" / "policy.pt"),
+        )
+
+
+def test_seed_configs_refuse_repeats_and_nothing() -> None:
+    from farsighter import make_config
+
+    cfg = make_config("ddqn", "CartPole-v1")
+    with pytest.raises(ConfigError, match="twice"):
+        seed_configs(cfg, [1, 2, 1])
+    with pytest.raises(ConfigError, match="at least one"):
+        seed_configs(cfg, [])
+    assert [c.run_dir for c in seed_configs(dataclasses.replace(cfg, run_dir="x"), [4])] == ["x/s4"]
+
+
+def test_cli_trains_seeds_into_their_own_directories(tmp_path: Path, capsys: Any) -> None:
+    args = ["train", "--algo", "ddqn", "--env", "CartPole-v1", "--total-steps", "400"]
+    args += ["--learning-starts", "100", "--eval-episodes", "1", "--no-progress"]
+    args += ["--run-dir", str(tmp_path / "r"), "--seeds", "1", "2"]
+    assert main(args) == 0
+    assert (tmp_path / "r" / "s1" / "policy.pt").is_file()
+    assert (tmp_path / "r" / "s2" / "policy.pt").is_file()
+    assert main([*args[:-3], "--seeds", "1", "x"]) == 2
+    assert "--seeds" in capsys.readouterr().err
+
+
+@pytest.mark.parametrize(
+    ("rows", "inp", "out"),
+    [(1, 4, 120), (128, 4, 120), (64, 128, 128), (128, 84, 2), (32, 400, 50)],
+)
+def test_stacked_linear_is_f_linear_per_seed(rows: int, inp: int, out: int) -> None:
+    """Forward and the three gradients of each seed's slice equal F.linear's alone, bit for bit
+    (the shapes of the suite's MLPs: CartPole, deep sea's one-hot input, the heads)."""
+    g = torch.Generator().manual_seed(0)
+    S = 5
+    x, w, b = (
+        torch.randn(*shape, generator=g) for shape in ((S, rows, inp), (S, out, inp), (S, out))
+    )
+    dy = torch.randn(S, rows, out, generator=g)
+    xs, ws, bs = (t.clone().requires_grad_() for t in (x, w, b))
+    y = StackedLinear.apply(xs, ws, bs)
+    (y * dy).sum().backward()
+    for s in range(S):
+        xa, wa, ba = (t[s].clone().requires_grad_() for t in (x, w, b))
+        ya = F.linear(xa, wa, ba)
+        (ya * dy[s]).sum().backward()
+        assert torch.equal(y[s], ya)
+        assert torch.equal(xs.grad[s], xa.grad)
+        assert torch.equal(ws.grad[s], wa.grad)
+        assert torch.equal(bs.grad[s], ba.grad)
+
+
+def test_seed_replay_samples_each_seed_as_its_replay_alone() -> None:
+    """Three seeds, two streams each, episodes of random lengths ended by terminations and
+    truncations, k = 3 windows from a recent window: each seed's rows are the rows its replay
+    alone samples, and its checkpoint is that replay's."""
+    seeds, E, cap = [11, 12, 13], 2, 300
+    seed_replay = SeedReplay(seeds, cap, (3,), np.float32, num_envs=E)
+    alone = [ReplayBuffer(cap, (3,), np.float32, num_envs=E, seed=s) for s in seeds]
+    rng = np.random.default_rng(0)
+    for _ in range(400):
+        obs = rng.standard_normal((len(seeds), E, 3)).astype(np.float32)
+        act = rng.integers(0, 4, (len(seeds), E))
+        rew = rng.standard_normal((len(seeds), E))
+        term, trunc = rng.random((len(seeds), E)) < 0.05, rng.random((len(seeds), E)) < 0.03
+        final = [
+            [o if (t or u) else None for o, t, u in zip(obs[s], term[s], trunc[s], strict=True)]
+            for s in range(len(seeds))
+        ]
+        for s, replay in enumerate(alone):
+            replay.add(obs[s], act[s], rew[s], term[s], trunc[s], final[s])
+        seed_replay.add(
+            obs.reshape(-1, 3),
+            act.reshape(-1),
+            rew.reshape(-1),
+            term.reshape(-1),
+            trunc.reshape(-1),
+            [o for f in final for o in f],
+        )
+    for _ in range(3):
+        batch = seed_replay.sample_seeds(20, k=3, gamma=0.9, recent=200)
+        for s, replay in enumerate(alone):
+            own = replay.sample(20, k=3, gamma=0.9, recent=200)
+            rows = slice(20 * s, 20 * (s + 1))
+            assert np.array_equal(batch.env_index[rows] - s * E, own.env_index)
+            for name in ("obs", "next_obs", "actions", "returns", "bootstrap", "index"):
+                assert np.array_equal(getattr(batch, name)[rows], getattr(own, name)), name
+    for s, replay in enumerate(alone):
+        mine, theirs = seed_replay.member_state(s), replay.state_dict()
+        assert mine.keys() == theirs.keys()
+        for key in theirs:
+            assert (
+                mine[key] == theirs[key] if key == "rng" else np.array_equal(mine[key], theirs[key])
+            )
+    again = SeedReplay(seeds, cap, (3,), np.float32, num_envs=E)
+    for s, replay in enumerate(alone):
+        again.load_member(s, replay.state_dict())
+    assert np.array_equal(again.frames, seed_replay.frames)
+    assert np.array_equal(again.count, seed_replay.count)
