@@ -1,0 +1,151 @@
+"""Seeds in one process against one seed alone: total environment steps per second.
+
+Issue #27's goal: 16 seeds of one config in one process train at a total of at least 8x the
+steps per second of one seed alone, on a small task (CartPole with CleanRL ``dqn.py``'s settings,
+and deep sea N = 20 with the library's defaults). Each entry is one child process:
+
+* ``alone``: ``farsighter.train.train`` on seed 1, one torch thread;
+* ``batch S, T threads``: ``farsighter.seeds.train_seeds`` on seeds 1..S as one batch, with T
+  torch threads (2 uses both cores of this machine for the batched products).
+
+Steps/s is every seed's environment steps over the wall time of the training call (the final
+evaluation and checkpoint excluded: :class:`farsighter.session.RunLog`'s ``loop_end``), the same
+count for the run alone and the batch. Rounds interleave the entries, so that the machine's drift
+falls on all of them alike.
+
+    python -m benchmarks.seeds_sps [--tasks cartpole deepsea] [--seeds 16] [--rounds 2]
+"""
+
+from __future__ import annotations
+
+import argparse
+import dataclasses
+import json
+import sys
+import tempfile
+import time
+from pathlib import Path
+from typing import Any
+
+REPO = Path(__file__).resolve().parent.parent
+TAG = "SEEDS_SPS_RESULT "
+TASKS = ("cartpole", "deepsea")
+GOAL = 8.0
+
+
+def task_spec(task: str) -> tuple[str, int, dict[str, Any]]:
+    """(env id, steps per seed, config values) of a task."""
+    from benchmarks.small_sps import CLEANRL_DQN
+
+    if task == "cartpole":
+        return "CartPole-v1", 20_000, {**CLEANRL_DQN, "eps_decay_steps": 10_000}
+    return "farsighter/DeepSea20-v0", 10_000, {}
+
+
+def run_one(env: str, steps: int, values: dict[str, Any], seeds: int, threads: int) -> dict[str, Any]:
+    import torch
+
+    from farsighter import make_config
+    from farsighter.seeds import seed_configs, train_seeds
+    from farsighter.session import RunLog
+    from farsighter.train import train
+
+    torch.set_num_threads(threads)
+    ends: list[float] = []
+    end_of_training = RunLog.end_of_training
+
+    def mark_end(self: Any) -> None:
+        ends.append(time.perf_counter())
+        end_of_training(self)
+
+    RunLog.end_of_training = mark_end  # type: ignore[method-assign]
+    with tempfile.TemporaryDirectory() as tmp:
+        cfg = make_config(
+            "ddqn",
+            env,
+            total_steps=steps,
+            run_dir=f"{tmp}/run",
+            torch_threads=threads,
+            device="cpu",
+            eval_every=0,
+            eval_episodes=1,
+            progress=False,
+            **values,
+        )
+        start = time.perf_counter()
+        if seeds == 0:
+            summaries = [train(dataclasses.replace(cfg, seed=1))]
+        else:
+            summaries = train_seeds(seed_configs(cfg, list(range(1, seeds + 1))))
+    wall = min(ends) - start
+    return {
+        "env": env,
+        "seeds": max(seeds, 1),
+        "alone": seeds == 0,
+        "threads": threads,
+        "steps_per_seed": steps,
+        "wall_s": round(wall, 2),
+        "total_sps": round(max(seeds, 1) * steps / wall, 1),
+        "final_eval_returns": [s["final_eval_return"] for s in summaries],
+        "preset": cfg.preset,
+    }
+
+
+def measure(task: str, seeds: int, threads: int) -> dict[str, Any]:
+    from benchmarks.atari_sps import child_env, fail, run_child
+
+    env_id, steps, values = task_spec(task)
+    spec = json.dumps(
+        {"env": env_id, "steps": steps, "values": values, "seeds": seeds, "threads": threads}
+    )
+    cmd = [sys.executable, str(Path(__file__).resolve()), "--one", spec]
+    env = {**child_env(threads), "PYTHONPATH": str(REPO)}
+    rc, lines, _ = run_child(cmd, REPO, env)
+    rows = [text[len(TAG) :] for _, text in lines if text.startswith(TAG)]
+    if rc != 0 or not rows:
+        fail(f"{task} seeds={seeds} threads={threads}", rc, lines)
+    return {**json.loads(rows[-1]), "task": task}
+
+
+def main() -> None:
+    p = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawTextHelpFormatter)
+    p.add_argument("--tasks", nargs="+", choices=TASKS, default=list(TASKS))
+    p.add_argument("--seeds", type=int, default=16, help="seeds in the batch")
+    p.add_argument("--rounds", type=int, default=2)
+    p.add_argument("--name", default="seeds_sps")
+    p.add_argument("--one", help=argparse.SUPPRESS)  # internal: one run, JSON spec
+    args = p.parse_args()
+    if args.one is not None:
+        spec = json.loads(args.one)
+        values = {k: tuple(v) if isinstance(v, list) else v for k, v in spec["values"].items()}
+        row = run_one(spec["env"], spec["steps"], values, spec["seeds"], spec["threads"])
+        print(TAG + json.dumps(row))
+        return
+    from benchmarks.common import write_result
+
+    entries = [(0, 1), (args.seeds, 1), (args.seeds, 2)]  # (seeds, threads); 0 = alone
+    runs = []
+    for round_ in range(args.rounds):
+        for task in args.tasks:
+            for seeds, threads in entries:
+                print(f"round {round_ + 1} {task} seeds={seeds or 'alone'} threads={threads}",
+                      file=sys.stderr, flush=True)
+                runs.append({**measure(task, seeds, threads), "round": round_ + 1})
+                print(f"  {runs[-1]['total_sps']} steps/s", file=sys.stderr, flush=True)
+    ratios = {}
+    for task in args.tasks:
+        for round_ in range(1, args.rounds + 1):
+            mine = [r for r in runs if r["task"] == task and r["round"] == round_]
+            alone = next(r["total_sps"] for r in mine if r["alone"])
+            for r in mine:
+                if not r["alone"]:
+                    key = f"{task} {r['seeds']} seeds {r['threads']} thread(s)"
+                    ratios.setdefault(key, []).append(round(r["total_sps"] / alone, 2))
+    write_result(
+        args.name,
+        {"goal": f"{args.seeds} seeds >= {GOAL}x one seed alone", "ratio_to_alone": ratios, "runs": runs},
+    )
+
+
+if __name__ == "__main__":
+    main()
