@@ -29,7 +29,7 @@ import numpy as np
 import torch
 from tqdm import tqdm
 
-from farsighter.agents.ddqn_seeds import SeedBatchDDQN, supports
+from farsighter.agents.ddqn_seeds import ALGOS, SeedBatchDDQN, supports
 from farsighter.config import Config, validate
 from farsighter.envs import check_spaces, make_vector_env
 from farsighter.errors import ConfigError
@@ -44,8 +44,9 @@ from farsighter.session import (
     restore_run,
     save_run,
 )
+from farsighter.train import POLICY_FILE, Callback, resolve_device, train
 
-__all__ = ["seed_configs", "train_seeds"]
+__all__ = ["batchable", "seed_configs", "train_seeds"]
 
 
 def seed_configs(cfg: Config, seeds: Sequence[int]) -> list[Config]:
@@ -63,26 +64,39 @@ def seed_configs(cfg: Config, seeds: Sequence[int]) -> list[Config]:
     ]
 
 
-def train_seeds(cfgs: Sequence[Config], batched: bool = True) -> list[dict[str, Any]]:
+def train_seeds(
+    cfgs: Sequence[Config],
+    callbacks: Sequence[Sequence[Callback]] | None = None,
+    batched: bool = True,
+) -> list[dict[str, Any]]:
     """Train each config (one per seed; :func:`seed_configs`) and return their summaries, in
     order. Seeds whose configs agree outside seed and run directory, that resume from the same
     point and whose agent allows it, train as one batch; the others (and all of them with
-    ``batched=False``) train alone, one after another."""
-    from farsighter.train import resolve_device, train
-
+    ``batched=False``) train alone, one after another. ``callbacks[i]``: the callbacks of run
+    ``i``, which see its steps and its agent as they would alone."""
     for cfg in cfgs:
         check_same_run(cfg)
         validate(cfg)
+    if len({cfg.seed for cfg in cfgs}) != len(cfgs):
+        raise ConfigError("train_seeds takes each seed once")
+    hooks = {cfg.seed: list(callbacks[i]) if callbacks else [] for i, cfg in enumerate(cfgs)}
     summaries: dict[int, dict[str, Any]] = {}
     for group in _groups(cfgs) if batched else [[c] for c in cfgs]:
         reason = _batch_refusal(group[0], resolve_device(group[0].device)) if len(group) > 1 else ""
         if reason or len(group) == 1:
             for cfg in group:
-                summaries[cfg.seed] = train(cfg)
+                summaries[cfg.seed] = train(cfg, callbacks=hooks[cfg.seed])
             continue
-        for summary in _train_batch(group, resolve_device(group[0].device)):
+        device = resolve_device(group[0].device)
+        for summary in _train_batch(group, [hooks[c.seed] for c in group], device):
             summaries[summary["seed"]] = summary
     return [summaries[cfg.seed] for cfg in cfgs]
+
+
+def batchable(cfg: Config) -> bool:
+    """Whether seeds of ``cfg`` train as one batch here (its agent has a seed-batched form for
+    its spaces and settings)."""
+    return not _batch_refusal(cfg, resolve_device(cfg.device))
 
 
 def _groups(cfgs: Sequence[Config]) -> list[list[Config]]:
@@ -104,6 +118,8 @@ def _start_point(cfg: Config) -> Any:
 
 
 def _batch_refusal(cfg: Config, device: torch.device) -> str:
+    if cfg.algo not in ALGOS:  # said without building an environment
+        return supports(cfg, None, device)
     probe = make_vector_env(cfg, seed=cfg.seed)
     try:
         check_spaces(cfg.algo, probe.single_observation_space, probe.single_action_space)
@@ -122,9 +138,12 @@ class _Seed:
     obs: Any
     state: LoopState
     log: RunLog
+    callbacks: Sequence[Callback]
 
 
-def _train_batch(cfgs: Sequence[Config], device: torch.device) -> list[dict[str, Any]]:
+def _train_batch(
+    cfgs: Sequence[Config], callbacks: Sequence[Sequence[Callback]], device: torch.device
+) -> list[dict[str, Any]]:
     cfg = cfgs[0]
     envs = [make_vector_env(c, seed=c.seed) for c in cfgs]
     obs_space, act_space = envs[0].single_observation_space, envs[0].single_action_space
@@ -134,13 +153,14 @@ def _train_batch(cfgs: Sequence[Config], device: torch.device) -> list[dict[str,
     batch = SeedBatchDDQN(cfgs, obs_space, act_space, device=device)
     members = [batch.member(s) for s in range(len(cfgs))]
     runs: list[_Seed] = []
-    for c, path, env, member in zip(cfgs, paths, envs, members, strict=True):
+    for c, path, env, member, hooks in zip(cfgs, paths, envs, members, callbacks, strict=True):
         if c.resume:
             state, env, obs = restore_run(path, c, member, env)
         else:
             state, (obs, _) = LoopState(), env.reset(seed=c.seed)
         quiet = dataclasses.replace(c, progress=False)  # one bar for the batch, below
-        runs.append(_Seed(c, path, env, obs, state, RunLog(path, quiet, state, resumed=c.resume)))
+        log = RunLog(path, quiet, state, resumed=c.resume)
+        runs.append(_Seed(c, path, env, obs, state, log, hooks))
     step = runs[0].state.global_step
     bar = tqdm(
         total=cfg.total_steps * len(runs),
@@ -165,11 +185,12 @@ def _train_batch(cfgs: Sequence[Config], device: torch.device) -> list[dict[str,
                 run.obs = next_obs
                 infos.append(info)
             batch.observe(vector_steps)
-            batch.learn(step)
-            for run, member, info in zip(runs, members, infos, strict=True):
+            metrics = batch.learn(step)
+            for run, member, info, mine in zip(runs, members, infos, metrics, strict=True):
                 run.state.global_step = step
-                loss = member.latest_loss()
-                run.log.step(run.state, info, {} if loss is None else {"td_loss": loss}, member)
+                for callback in run.callbacks:
+                    callback.on_step(step, info, member)
+                run.log.step(run.state, info, mine, member)
                 if passed_multiple(prev, step, cfg.eval_every):
                     run.log.evaluate(run.state, member)
                 if passed_multiple(prev, step, cfg.checkpoint_every) and step < cfg.total_steps:
@@ -185,12 +206,12 @@ def _train_batch(cfgs: Sequence[Config], device: torch.device) -> list[dict[str,
 
 def _finish(run: _Seed, member: Any) -> dict[str, Any]:
     """What ``train`` does after its last step, for one seed."""
-    from farsighter.train import POLICY_FILE
-
     state, cfg = run.state, run.cfg
     run.log.end_of_training()
     if state.evals == 0 or (cfg.eval_every and state.global_step % cfg.eval_every):
         run.log.evaluate(state, member)
     save_run(run.path, cfg, state, member, run.envs, run.obs)
     torch.save(member.state_dict(include_replay=False), run.path / POLICY_FILE)
+    for callback in run.callbacks:
+        callback.on_finish(run.path, member)
     return run.log.summary(state)

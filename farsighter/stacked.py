@@ -4,9 +4,10 @@ Several seeds of one config train in one process (:mod:`farsighter.seeds`) by st
 networks' parameters along a leading seed axis S and running each layer as one batched matrix
 product over all seeds. Each seed's slice is computed exactly as its own network would compute it
 alone: :class:`StackedLinear` runs ``x W^T + b`` forward and its three gradients backward with the
-same operand order as ``torch.nn.functional.linear`` and its autograd formula, so on CPU a seed's
-outputs and gradients are bit-for-bit those of ``F.linear`` (checked for every layer shape of the
-suite's networks in ``tests/test_seeds.py``).
+same operand order as ``torch.nn.functional.linear`` and its autograd formula, and products too
+small for gemm go through ``F.linear`` seed by seed (:data:`SMALL_PRODUCT`), so on CPU a seed's
+outputs and gradients are bit-for-bit those of ``F.linear`` (checked over a grid of layer shapes
+in ``tests/test_seeds.py``).
 
 A :class:`StackedQNetwork` is built from S :class:`farsighter.networks.QNetwork` s (each built
 under its own seed, so the initial weights are each seed's own) and hands back any seed's weights
@@ -20,9 +21,48 @@ from collections.abc import Sequence
 from typing import Any
 
 import torch
+import torch.nn.functional as F
 from torch import nn
 
 from farsighter.networks import MLPTorso, QNetwork
+
+ALIGN = 16
+"""Floats (64 bytes) that every seed's slice starts at a multiple of. A tensor alone starts at an
+address aligned so (torch's CPU allocator), and a small gemm's rounding depends on where its
+operands start: seed s's slice of a plain (S, ...) tensor starts wherever s times its size puts
+it, and its products round otherwise than the same matrix alone."""
+
+
+def aligned_empty(shape: Sequence[int], like: torch.Tensor) -> torch.Tensor:
+    """An uninitialised (S, ...) tensor whose seed slices are each contiguous and start on an
+    :data:`ALIGN` boundary (a padded seed stride)."""
+    S, *rest = shape
+    size = 1
+    for d in rest:
+        size *= d
+    stride = -(-size // ALIGN) * ALIGN
+    buf = torch.empty(S * stride + ALIGN, dtype=like.dtype, device=like.device)
+    start = (-buf.data_ptr() // buf.element_size()) % ALIGN if buf.device.type == "cpu" else 0
+    inner = torch.empty(rest).stride() if rest else ()
+    return buf.as_strided((S, *rest), (stride, *inner), start)
+
+
+def aligned(t: torch.Tensor) -> torch.Tensor:
+    """``t`` when each seed's slice is contiguous and starts on an :data:`ALIGN` boundary, else a
+    copy laid out so (CPU only: elsewhere ``t``)."""
+    if t.device.type != "cpu":
+        return t
+    inner = 1
+    for size, stride in zip(reversed(t.shape[1:]), reversed(t.stride()[1:]), strict=True):
+        if stride != inner and size > 1:
+            break
+        inner *= size
+    else:
+        if t.stride(0) % ALIGN == 0 and (t.data_ptr() // t.element_size()) % ALIGN == 0:
+            return t
+    out = aligned_empty(t.shape, t)
+    out.copy_(t)
+    return out
 
 
 class StackedLinear(torch.autograd.Function):
@@ -38,23 +78,50 @@ class StackedLinear(torch.autograd.Function):
     def forward(
         ctx: Any, x_SBI: torch.Tensor, w_SOI: torch.Tensor, b_SO: torch.Tensor
     ) -> torch.Tensor:  # type: ignore[override]
+        x_SBI, w_SOI = aligned(x_SBI), aligned(w_SOI)
         ctx.save_for_backward(x_SBI, w_SOI)
-        return torch.baddbmm(b_SO.unsqueeze(1), x_SBI, w_SOI.transpose(1, 2))
+        return _affine(x_SBI, w_SOI, b_SO)
 
     @staticmethod
     def backward(ctx: Any, dy_SBO: torch.Tensor) -> tuple[torch.Tensor | None, ...]:  # type: ignore[override]
         x_SBI, w_SOI = ctx.saved_tensors
-        dx = torch.bmm(dy_SBO, w_SOI) if ctx.needs_input_grad[0] else None
-        dw = torch.bmm(dy_SBO.transpose(1, 2), x_SBI) if ctx.needs_input_grad[1] else None
+        dy_SBO = aligned(dy_SBO)
+        dx = _product(dy_SBO, w_SOI) if ctx.needs_input_grad[0] else None
+        dw = _product(dy_SBO.transpose(1, 2), x_SBI) if ctx.needs_input_grad[1] else None
         db = dy_SBO.sum(1) if ctx.needs_input_grad[2] else None
         return dx, dw, db
 
 
+SMALL_PRODUCT = 400
+"""On CPU, torch's batched product takes a plain loop kernel for matrices of fewer multiply-adds
+than this (rows x inner x columns; ``baddbmm`` in ATen's LinearAlgebra.cpp), whose rounding
+differs from the gemm that ``F.linear`` and larger batched products use."""
+
+
 def stacked_linear(x_SBI: torch.Tensor, w_SOI: torch.Tensor, b_SO: torch.Tensor) -> torch.Tensor:
-    """:class:`StackedLinear`; without autograd (acting, targets) its forward alone."""
+    """:class:`StackedLinear`; without autograd (acting, targets) its forward alone. A product
+    below :data:`SMALL_PRODUCT` per seed (a small head acting on one observation) is ``F.linear``
+    seed by seed, with autograd's own backward."""
+    rows, inner = x_SBI.shape[1], x_SBI.shape[2]
+    if rows * inner * w_SOI.shape[1] < SMALL_PRODUCT:
+        x_SBI, w_SOI = aligned(x_SBI), aligned(w_SOI)  # each slice where a tensor alone starts
+        return torch.stack([F.linear(x_SBI[s], w_SOI[s], b_SO[s]) for s in range(len(w_SOI))])
     if torch.is_grad_enabled() and (w_SOI.requires_grad or x_SBI.requires_grad):
         return StackedLinear.apply(x_SBI, w_SOI, b_SO)  # type: ignore[no-any-return]
-    return torch.baddbmm(b_SO.unsqueeze(1), x_SBI, w_SOI.transpose(1, 2))
+    return _affine(aligned(x_SBI), aligned(w_SOI), b_SO)
+
+
+def _affine(x_SBI: torch.Tensor, w_SOI: torch.Tensor, b_SO: torch.Tensor) -> torch.Tensor:
+    """``x W^T + b`` per seed into an aligned result (the bias first, then the product added)."""
+    out = aligned_empty((x_SBI.shape[0], x_SBI.shape[1], w_SOI.shape[1]), x_SBI)
+    out.copy_(b_SO.unsqueeze(1).expand_as(out))
+    return out.baddbmm_(x_SBI, w_SOI.transpose(1, 2))
+
+
+def _product(a_SMK: torch.Tensor, b_SKN: torch.Tensor) -> torch.Tensor:
+    """``a b`` per seed into an aligned result."""
+    out = aligned_empty((a_SMK.shape[0], a_SMK.shape[1], b_SKN.shape[2]), a_SMK)
+    return torch.bmm(a_SMK, b_SKN, out=out)
 
 
 def stackable(net: nn.Module) -> bool:
@@ -80,7 +147,7 @@ class StackedQNetwork(nn.Module):
             raise ValueError("StackedQNetwork stacks QNetworks with fp32 MLP torsos")
         self.names = [name for name, _ in nets[0].named_parameters()]
         self.weights = nn.ParameterList(
-            nn.Parameter(torch.stack([dict(net.named_parameters())[name].detach() for net in nets]))
+            nn.Parameter(_stacked([dict(net.named_parameters())[name].detach() for net in nets]))
             for name in self.names
         )
 
@@ -92,7 +159,9 @@ class StackedQNetwork(nn.Module):
         """Q (S, B, A) of each seed on its own rows; ``members`` picks some seeds' networks
         (``obs_SB`` then holds their rows only)."""
         x = obs_SB.float().flatten(2)
-        params = [p[members] for p in self.weights]
+        params = (
+            list(self.weights) if members == slice(None) else [p[members] for p in self.weights]
+        )
         layers = [(params[i], params[i + 1]) for i in range(0, len(params), 2)]
         for weight, bias in layers[:-1]:  # the torso: ReLU after each layer
             x = torch.relu(stacked_linear(x, weight, bias))
@@ -113,6 +182,15 @@ class StackedQNetwork(nn.Module):
         with torch.no_grad():
             for name, p in zip(self.names, self.weights, strict=True):
                 p[s].copy_(state[name])
+
+
+def _stacked(tensors: Sequence[torch.Tensor]) -> torch.Tensor:
+    """The tensors stacked along a new seed axis, each seed's slice aligned (:data:`ALIGN`)."""
+    out = aligned_empty((len(tensors), *tensors[0].shape), tensors[0])
+    with torch.no_grad():
+        for s, t in enumerate(tensors):
+            out[s].copy_(t)
+    return out
 
 
 def member_optimizer_state(opt: torch.optim.Optimizer, s: int) -> dict[str, Any]:

@@ -22,7 +22,7 @@ from farsighter.errors import ConfigError
 from farsighter.replay import ReplayBuffer
 from farsighter.replay.seeds import SeedReplay
 from farsighter.seeds import seed_configs, train_seeds
-from farsighter.stacked import StackedLinear
+from farsighter.stacked import stacked_linear
 from farsighter.train import train
 
 SEEDS = (3, 5, 8)
@@ -155,30 +155,32 @@ def test_cli_trains_seeds_into_their_own_directories(tmp_path: Path, capsys: Any
     assert "--seeds" in capsys.readouterr().err
 
 
-@pytest.mark.parametrize(
-    ("rows", "inp", "out"),
-    [(1, 4, 120), (128, 4, 120), (64, 128, 128), (128, 84, 2), (32, 400, 50)],
-)
-def test_stacked_linear_is_f_linear_per_seed(rows: int, inp: int, out: int) -> None:
-    """Forward and the three gradients of each seed's slice equal F.linear's alone, bit for bit
-    (the shapes of the suite's MLPs: CartPole, deep sea's one-hot input, the heads)."""
-    g = torch.Generator().manual_seed(0)
-    S = 5
-    x, w, b = (
-        torch.randn(*shape, generator=g) for shape in ((S, rows, inp), (S, out, inp), (S, out))
-    )
-    dy = torch.randn(S, rows, out, generator=g)
-    xs, ws, bs = (t.clone().requires_grad_() for t in (x, w, b))
-    y = StackedLinear.apply(xs, ws, bs)
-    (y * dy).sum().backward()
-    for s in range(S):
-        xa, wa, ba = (t[s].clone().requires_grad_() for t in (x, w, b))
-        ya = F.linear(xa, wa, ba)
-        (ya * dy[s]).sum().backward()
-        assert torch.equal(y[s], ya)
-        assert torch.equal(xs.grad[s], xa.grad)
-        assert torch.equal(ws.grad[s], wa.grad)
-        assert torch.equal(bs.grad[s], ba.grad)
+@pytest.mark.parametrize("rows", [1, 2, 3, 16, 64, 128])
+def test_stacked_linear_is_f_linear_per_seed(rows: int) -> None:
+    """Forward and the three gradients of each seed's slice equal F.linear's alone, bit for bit,
+    over layer shapes from a 4-wide input to deep sea's one-hot 400 and heads of 2 to 128 outputs
+    (small products take another kernel on CPU: stacked.SMALL_PRODUCT)."""
+    g = torch.Generator().manual_seed(rows)
+    S = 3
+    for inp in (4, 8, 30, 84, 120, 159, 400):
+        for out in (2, 3, 5, 16, 64, 84, 128):
+            shapes = ((S, rows, inp), (S, out, inp), (S, out))
+            x, w, b = (torch.randn(*shape, generator=g) for shape in shapes)
+            dy = torch.randn(S, rows, out, generator=g)
+            xs, ws, bs = (t.clone().requires_grad_() for t in (x, w, b))
+            y = stacked_linear(xs, ws, bs)
+            (y * dy).sum().backward()
+            with torch.no_grad():
+                assert torch.equal(stacked_linear(x, w, b), y.detach())
+            for s in range(S):
+                xa, wa, ba = (t[s].clone().requires_grad_() for t in (x, w, b))
+                ya = F.linear(xa, wa, ba)
+                (ya * dy[s]).sum().backward()
+                where = (rows, inp, out, s)
+                assert torch.equal(y[s], ya), where
+                assert torch.equal(xs.grad[s], xa.grad), where
+                assert torch.equal(ws.grad[s], wa.grad), where
+                assert torch.equal(bs.grad[s], ba.grad), where
 
 
 def test_seed_replay_samples_each_seed_as_its_replay_alone() -> None:
@@ -228,3 +230,31 @@ def test_seed_replay_samples_each_seed_as_its_replay_alone() -> None:
         again.load_member(s, replay.state_dict())
     assert np.array_equal(again.frames, seed_replay.frames)
     assert np.array_equal(again.count, seed_replay.count)
+
+
+def test_a_study_batches_the_seeds_of_ddqn_and_its_runs_are_those_alone(
+    tmp_path: Path, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    """The maze study (its probe callback included) trains DDQN's two seeds as one batch and
+    Farsighter's one after another; every file of every run equals the study run job by job."""
+    from farsighter.studies import maze, runner
+
+    args = ["--steps", "1200", "--seeds", "1", "2", "--workers", "1", "--no-progress"]
+    args += ["--agents", "DDQN", "Farsighter (k=10)"]
+    settings = runner.settings_from(maze.STUDY, runner.parse(maze.STUDY, args))
+    jobs = maze.STUDY.grid(settings)
+    groups = runner.seed_batches(maze.STUDY, settings, tmp_path / "x", jobs)
+    assert [[(j.label, j.seed) for j in g] for g in groups] == [
+        [("DDQN", 1), ("DDQN", 2)],
+        [("Farsighter (k=10)", 1)],
+        [("Farsighter (k=10)", 2)],
+    ]
+    assert main(["maze", *args, "--out", str(tmp_path / "batched")]) == 0
+    monkeypatch.setattr(runner, "SEEDS_PER_BATCH", 1)
+    assert main(["maze", *args, "--out", str(tmp_path / "alone")]) == 0
+    for run in ("ddqn__s1", "ddqn__s2", "farsighter-k-10__s2"):
+        a, b = tmp_path / "alone" / "runs" / run, tmp_path / "batched" / "runs" / run
+        assert (a / "probe.csv").read_text() == (b / "probe.csv").read_text(), run
+        assert _files(a) == _files(b), run
+        if run.startswith("ddqn"):
+            _same_checkpoints(_agent_state(a / "policy.pt"), _agent_state(b / "policy.pt"))

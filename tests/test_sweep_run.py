@@ -192,3 +192,50 @@ def test_the_progress_bar_counts_a_job_that_reported_done_while_it_exits() -> No
     assert bar.n == 600 + 600 + 250
     _show(bar, 600, {}, [(jobs[1], 600)])  # nothing reported yet
     assert bar.n == 600
+
+
+def test_seeds_sharing_a_process_train_as_they_do_alone(tmp_path: Path) -> None:
+    """``resources.seeds_per_process = 2``: the ddqn trials of seeds 1-3 run as a batch of two and
+    one alone, farsighter's in turn in one process; every trial's results equal those of the sweep
+    run trial by trial (ddqn's batched seeds bit for bit), and each keeps its attempts log."""
+    import torch
+
+    plain = load_spec(_spec(tmp_path, '["ddqn", "farsighter"]', "[1, 2, 3]", 600))
+    file = _spec(tmp_path, '["ddqn", "farsighter"]', "[1, 2, 3]", 600)
+    file.write_text(file.read_text() + "seeds_per_process = 2\n")
+    shared = load_spec(file)
+    assert shared.resources.seeds_per_process == 2
+    run_sweep(plain, tmp_path / "plain", Backend(workers=1), show_progress=False)
+    run_sweep(shared, tmp_path / "shared", Backend(workers=1), show_progress=False)
+    for trial in plain.trials:
+        a = torch.load(tmp_path / "plain" / "trials" / trial.name / "policy.pt", weights_only=False)
+        b = torch.load(
+            tmp_path / "shared" / "trials" / trial.name / "policy.pt", weights_only=False
+        )
+        assert _tensors(a).keys() == _tensors(b).keys()
+        assert all(torch.equal(t, _tensors(b)[k]) for k, t in _tensors(a).items()), trial.name
+        assert attempts(tmp_path / "shared" / "trials" / trial.name) == 1
+    with open(tmp_path / "shared" / "results.csv") as f:
+        assert len(list(csv.DictReader(f))) == 6
+
+
+@pytest.mark.parametrize("value", ["0", "1.5", "true"])
+def test_seeds_per_process_must_be_a_whole_number_from_1(tmp_path: Path, value: str) -> None:
+    file = _spec(tmp_path, '["ddqn"]', "[1]", 300)
+    file.write_text(file.read_text() + f"seeds_per_process = {value}\n")
+    with pytest.raises(engine.FarsighterError, match="seeds_per_process must be an integer >= 1"):
+        load_spec(file)
+
+
+def _tensors(state: object, prefix: str = "") -> dict[str, object]:
+    """Every tensor in a nested state, by its path."""
+    import torch
+
+    if isinstance(state, torch.Tensor):
+        return {prefix: state}
+    if isinstance(state, dict):
+        out: dict[str, object] = {}
+        for key, value in state.items():
+            out.update(_tensors(value, f"{prefix}/{key}"))
+        return out
+    return {}

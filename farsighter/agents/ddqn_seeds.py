@@ -12,7 +12,6 @@ writes: a seed started in a batch can be resumed alone, and the other way round.
 
 from __future__ import annotations
 
-import copy
 import dataclasses
 from collections.abc import Sequence
 from typing import Any
@@ -45,10 +44,13 @@ from farsighter.stacked import (
     stackable,
 )
 
+ALGOS = ("ddqn", "kddqn")
+"""The algorithms with a seed-batched form."""
 
-def supports(cfg: Config, obs_space: gym.Space, device: torch.device) -> str:
+
+def supports(cfg: Config, obs_space: gym.Space | None, device: torch.device) -> str:
     """Why ``cfg`` cannot train as a seed batch here ('' when it can)."""
-    if cfg.algo not in ("ddqn", "kddqn"):
+    if cfg.algo not in ALGOS:
         return f"{cfg.algo} trains its seeds one at a time (batched: ddqn, kddqn)"
     if not isinstance(obs_space, gym.spaces.Box) or len(obs_space.shape or ()) == 3:
         return "image observations train their seeds one at a time (batched: flat observations)"
@@ -77,7 +79,8 @@ class SeedBatchDDQN:
         if not all(stackable(net) for net in nets):
             raise ValueError("SeedBatchDDQN needs fp32 MLP Q-networks")
         self.q = StackedQNetwork(nets).to(device)
-        self.q_target = copy.deepcopy(self.q)
+        # built again rather than deep-copied: a copy would lose the seeds' aligned layout
+        self.q_target = StackedQNetwork(nets).to(device)
         self.q_target.requires_grad_(False)
         self.params = list(self.q.parameters())
         self.opt = make_optimizer(self.params, cfg)
@@ -95,7 +98,6 @@ class SeedBatchDDQN:
         self.rngs = [np.random.default_rng(c.seed + 2) for c in cfgs]
         self.counters = Counters(k=cfg.k)  # one schedule: the seeds step together
         self.epsilon = cfg.eps_start
-        self.last_loss_SB: torch.Tensor | None = None  # each seed's elementwise TD loss
 
     @property
     def seeds(self) -> int:
@@ -105,8 +107,13 @@ class SeedBatchDDQN:
     def greedy(self, obs_SE: np.ndarray) -> np.ndarray:
         """argmax_a Q(s, a) of every seed's networks on its own observations, (S, E)."""
         with torch.inference_mode():
-            obs = torch.as_tensor(np.asarray(obs_SE)).to(self.device)
-            return self.q(obs).argmax(dim=2).cpu().numpy()
+            obs = torch.from_numpy(obs_SE)
+            return (
+                self.q(obs if self.device.type == "cpu" else obs.to(self.device))
+                .argmax(dim=2)
+                .cpu()
+                .numpy()
+            )
 
     def act(self, obs_SE: np.ndarray, global_step: int) -> np.ndarray:
         """Each seed's epsilon-greedy actions from its own generator, (S, E)."""
@@ -139,12 +146,20 @@ class SeedBatchDDQN:
         )
 
     # ------------------------------------------------------------------ learning
-    def learn(self, global_step: int) -> None:
+    def learn(self, global_step: int) -> list[dict[str, torch.Tensor]]:
+        """The updates owed at ``global_step``; each seed's metrics as ``DDQNAgent.learn`` gives
+        them alone (its latest TD loss when it updated, else nothing)."""
+        loss_SB = None
         for _ in range(updates_owed(self.counters, self.cfg, global_step)):
-            self.last_loss_SB = self.update()
+            loss_SB = self.update()
         sync_target(
             self.counters, global_step, self.cfg.target_update_every, (self.q, self.q_target)
         )
+        if loss_SB is None:
+            return [{} for _ in range(self.seeds)]
+        # each seed's mean taken as td_loss takes it alone (a mean over a row of (S, B) may round
+        # differently)
+        return [{"td_loss": loss_SB[s].mean()} for s in range(self.seeds)]
 
     def update(self) -> torch.Tensor:
         """One gradient step of every seed on its own double-Q minibatch; the elementwise TD
@@ -238,11 +253,6 @@ class SeedMember:
 
     def diagnostics(self) -> dict[str, float]:
         return {"epsilon": self.batch.epsilon, "k": float(self.batch.counters.k)}
-
-    def latest_loss(self) -> torch.Tensor | None:
-        """The TD loss of this seed's latest update (its mean taken as td_loss takes it alone)."""
-        losses = self.batch.last_loss_SB
-        return None if losses is None else losses[self.s].mean()
 
     def state_dict(self, include_replay: bool = True) -> dict[str, Any]:
         """The checkpoint of ``DDQNAgent`` alone, for this seed."""

@@ -345,10 +345,11 @@ def run_study(
     local processes), then write the study's outputs."""
     todo = _prepare(study, settings, out)
     if todo:
+        groups = seed_batches(study, settings, out, todo)
         execute(
-            _run,
-            [(study, settings, job, str(job.run_dir(out))) for job in todo],
-            steps=[job.steps for job in todo],
+            _run_jobs,
+            [(study, settings, tuple(g), str(out), str(g[0].run_dir(out))) for g in groups],
+            steps=[sum(job.steps for job in g) for g in groups],
             backend=backend or Backend(workers=settings.workers),
             desc=f"{study.kind} study",
             show_progress=show_progress,
@@ -388,15 +389,51 @@ def _finished(study: Study, run_dir: Path) -> bool:
     return all((run_dir / name).exists() for name in study.finished)
 
 
-def _run(study: Study, settings: Any, job: Job, run_dir: str, progress: Any) -> str:
-    """One job (in a worker process): train the run with the study's callback. A restarted job
-    starts afresh (``overwrite``): the callbacks' state is not checkpointed."""
+SEEDS_PER_BATCH = 16
+"""Most seeds of one agent and task that a study trains as one batch."""
+
+
+def seed_batches(study: Study, settings: Any, out: Path, jobs: Sequence[Job]) -> list[list[Job]]:
+    """The jobs as the worker processes take them: the seeds of one agent and task together (up
+    to :data:`SEEDS_PER_BATCH`) where the agent trains seeds as one batch
+    (:func:`farsighter.seeds.batchable`), every other job alone; in the order of ``jobs``."""
+    from farsighter.seeds import batchable
+
+    together: dict[tuple[str, str | None], list[list[Job]]] = {}
+    groups: list[list[Job]] = []
+    for job in jobs:
+        chunks = together.get((job.label, job.task))
+        if chunks is None:
+            ok = batchable(study.config(settings, job, job.run_dir(out)))
+            chunks = together[(job.label, job.task)] = [] if ok else [[]]
+        if chunks == [[]] or not chunks or len(chunks[-1]) == SEEDS_PER_BATCH:
+            groups.append([job])
+            if chunks != [[]]:
+                chunks.append(groups[-1])
+            continue
+        chunks[-1].append(job)
+    return groups
+
+
+def _run_jobs(
+    study: Study, settings: Any, jobs: tuple[Job, ...], out: str, key: str, progress: Any
+) -> str:
+    """Jobs in one worker process: one run with the study's callback, or the seeds of one agent
+    and task as one batch (each with its callback, as alone). A restarted job starts afresh
+    (``overwrite``): the callbacks' state is not checkpointed. ``key``: the first run's
+    directory, the job's name in ``progress``."""
+    from farsighter.seeds import train_seeds
     from farsighter.train import train
 
-    cfg = study.config(settings, job, Path(run_dir))
-    callbacks = [study.callback(settings)] if study.callback else []
-    train(cfg, callbacks=[*callbacks, Progress(progress, run_dir)])
-    return run_dir
+    cfgs = [study.config(settings, job, job.run_dir(Path(out))) for job in jobs]
+    hooks = [[study.callback(settings)] if study.callback else [] for _ in cfgs]
+    if len(cfgs) == 1:
+        train(cfgs[0], callbacks=[*hooks[0], Progress(progress, key)])
+        return key
+    hooks[0].append(Progress(progress, key, runs=len(cfgs)))  # the batch's seeds step together
+    train_seeds(cfgs, callbacks=hooks)
+    progress[key] = -1
+    return key
 
 
 # ------------------------------------------------------------------------------------------------

@@ -82,15 +82,19 @@ class Backend:
 
 
 class Progress:
-    """Read-only training callback: tells the parent how far a run is (-1 when done)."""
+    """Read-only training callback: tells the parent how far a run is (-1 when done). ``runs``:
+    the runs of a seed batch this one speaks for (they step together), whose steps it reports."""
 
-    def __init__(self, progress: MutableMapping[str, int], key: str, every: int = 500) -> None:
+    def __init__(
+        self, progress: MutableMapping[str, int], key: str, every: int = 500, runs: int = 1
+    ) -> None:
         self.progress, self.key, self.every, self.next = progress, key, every, 0
+        self.runs = runs
 
     def on_step(self, global_step: int, info: dict[str, Any], agent: Any) -> None:
         if global_step >= self.next:
             self.next = global_step + self.every
-            self.progress[self.key] = global_step
+            self.progress[self.key] = global_step * self.runs
 
     def on_finish(self, run_dir: Path, agent: Any) -> None:
         self.progress[self.key] = -1

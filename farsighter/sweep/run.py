@@ -141,7 +141,21 @@ def run_sweep(
     budget = {t.name: _steps(t) for t in spec.trials}
     steps = [budget[t.name] for t in todo]
     t0 = time.perf_counter()
-    if todo:
+    if todo and spec.resources.seeds_per_process > 1:
+        groups = seed_groups(todo, spec.resources.seeds_per_process)
+        execute(
+            run_trials,
+            [
+                (tuple(g), tuple(str(trial_dir(out, t)) for t in g), str(trial_dir(out, g[0])))
+                for g in groups
+            ],
+            steps=[sum(budget[t.name] for t in g) for g in groups],
+            backend=backend,
+            desc=f"sweep {spec.name}",
+            show_progress=show_progress,
+            done_before=sum(budget.values()) - sum(steps),
+        )
+    elif todo:
         execute(
             run_trial,
             [(trial, str(trial_dir(out, trial))) for trial in todo],
@@ -182,15 +196,47 @@ def run_trial(trial: Trial, run_dir: str, progress: Any) -> str:
     (a run killed before its first checkpoint leaves nothing worth keeping)."""
     from farsighter.train import train
 
-    path = Path(run_dir)
+    train(_start(trial, Path(run_dir)), callbacks=[Progress(progress, run_dir)])
+    return run_dir
+
+
+def run_trials(
+    trials: tuple[Trial, ...], run_dirs: tuple[str, ...], key: str, progress: Any
+) -> str:
+    """Trials that differ only in seed, in one worker (``resources.seeds_per_process``): each
+    resumes or starts as :func:`run_trial` would, and they train together
+    (:func:`farsighter.seeds.train_seeds`). ``key``: the job's name in ``progress``, where it
+    reports -1 when all are done."""
+    from farsighter.seeds import train_seeds
+
+    cfgs = [_start(t, Path(d)) for t, d in zip(trials, run_dirs, strict=True)]
+    first = [Progress(progress, key, runs=len(cfgs))]  # the seeds of a batch step together
+    train_seeds(cfgs, callbacks=[first, *[[] for _ in cfgs[1:]]])
+    progress[key] = -1
+    return key
+
+
+def seed_groups(trials: Sequence[Trial], size: int) -> list[list[Trial]]:
+    """``trials`` in groups of at most ``size`` that differ only in seed, in the sweep's order."""
+    groups: dict[Any, list[list[Trial]]] = {}
+    order: list[list[Trial]] = []
+    for trial in trials:
+        chunks = groups.setdefault(replace(trial, seed=0), [])
+        if not chunks or len(chunks[-1]) == size:
+            chunks.append([])
+            order.append(chunks[-1])
+        chunks[-1].append(trial)
+    return order
+
+
+def _start(trial: Trial, path: Path) -> Any:
+    """The trial's config, resuming when it has a checkpoint; one line in its attempts log."""
     resume = (path / CHECKPOINT_FILE).exists()
     attempts_log(path).parent.mkdir(parents=True, exist_ok=True)
     with open(attempts_log(path), "a") as log:
         how = "resume" if resume else "fresh"
         log.write(f"{time.time():.3f} {socket.gethostname()} pid {os.getpid()} {how}\n")
-    cfg = replace(trial.config(path), resume=resume, overwrite=not resume)
-    train(cfg, callbacks=[Progress(progress, run_dir)])
-    return run_dir
+    return replace(trial.config(path), resume=resume, overwrite=not resume)
 
 
 def attempts_log(run_dir: Path) -> Path:

@@ -29,6 +29,9 @@ grid's lists is one *trial*, a training run with its own config and run director
     max_concurrent = 0               # trials at once (0: no limit beyond the resources)
     retries = 3                      # times a failed or killed trial is restarted from its
                                      #   checkpoint (an integer >= 0)
+    seeds_per_process = 1            # trials that differ only in seed trained together in one
+                                     #   process, up to this many (an integer >= 1; batched as
+                                     #   one computation where the agent allows it)
 
 The same sweep in YAML::
 
@@ -133,6 +136,10 @@ class Resources:
     """Most trials running at once (0: no limit beyond the resources)."""
     retries: int = 3
     """Times a failed or killed trial is restarted from its checkpoint (>= 0)."""
+    seeds_per_process: int = 1
+    """Trials that differ only in seed trained together in one process, up to this many
+    (:func:`farsighter.seeds.train_seeds`: one batched computation where the agent allows it,
+    one after another otherwise); each keeps its own trial directory and resumes on its own."""
 
 
 @dataclass(frozen=True)
@@ -446,12 +453,13 @@ def _resources(raw: Any, source: str) -> Resources:
         "gpus": (False, "a number >= 0 (GPU fraction per trial)"),
         "max_concurrent": (True, "an integer >= 0 (0: no limit)"),
         "retries": (True, "an integer >= 0"),
+        "seeds_per_process": (True, "an integer >= 1"),
     }
     for key, value in raw.items():
         integer, want = checks[key]
         number = isinstance(value, (int, float)) and not isinstance(value, bool)
         ok = number and (isinstance(value, int) if integer else True)
-        ok = ok and (value > 0 if key == "cpus" else value >= 0)
+        ok = ok and (value > 0 if key in ("cpus", "seeds_per_process") else value >= 0)
         if not ok:
             raise SweepError(f"{source}: resources.{key} must be {want} (got {value!r})")
     default = Resources()
@@ -460,6 +468,7 @@ def _resources(raw: Any, source: str) -> Resources:
         gpus=float(raw.get("gpus", default.gpus)),
         max_concurrent=int(raw.get("max_concurrent", default.max_concurrent)),
         retries=int(raw.get("retries", default.retries)),
+        seeds_per_process=int(raw.get("seeds_per_process", default.seeds_per_process)),
     )
 
 
