@@ -42,7 +42,9 @@ def task_spec(task: str) -> tuple[str, int, dict[str, Any]]:
     return "farsighter/DeepSea20-v0", 10_000, {}
 
 
-def run_one(env: str, steps: int, values: dict[str, Any], seeds: int, threads: int) -> dict[str, Any]:
+def run_one(
+    env: str, steps: int, values: dict[str, Any], seeds: int, threads: int
+) -> dict[str, Any]:
     import torch
 
     from farsighter import make_config
@@ -128,8 +130,11 @@ def main() -> None:
     for round_ in range(args.rounds):
         for task in args.tasks:
             for seeds, threads in entries:
-                print(f"round {round_ + 1} {task} seeds={seeds or 'alone'} threads={threads}",
-                      file=sys.stderr, flush=True)
+                print(
+                    f"round {round_ + 1} {task} seeds={seeds or 'alone'} threads={threads}",
+                    file=sys.stderr,
+                    flush=True,
+                )
                 runs.append({**measure(task, seeds, threads), "round": round_ + 1})
                 print(f"  {runs[-1]['total_sps']} steps/s", file=sys.stderr, flush=True)
     ratios = {}
@@ -143,7 +148,11 @@ def main() -> None:
                     ratios.setdefault(key, []).append(round(r["total_sps"] / alone, 2))
     write_result(
         args.name,
-        {"goal": f"{args.seeds} seeds >= {GOAL}x one seed alone", "ratio_to_alone": ratios, "runs": runs},
+        {
+            "goal": f"{args.seeds} seeds >= {GOAL}x one seed alone",
+            "ratio_to_alone": ratios,
+            "runs": runs,
+        },
     )
 
 

@@ -153,6 +153,11 @@ def test_cli_trains_seeds_into_their_own_directories(tmp_path: Path, capsys: Any
     assert (tmp_path / "r" / "s2" / "policy.pt").is_file()
     assert main([*args[:-3], "--seeds", "1", "x"]) == 2
     assert "--seeds" in capsys.readouterr().err
+    more = ["train", "--run-dir", str(tmp_path / "r"), "--resume", "--total-steps", "600"]
+    assert main([*more, "--seeds", "1", "2"]) == 0
+    for seed in (1, 2):
+        summary = (tmp_path / "r" / f"s{seed}" / "summary.json").read_text()
+        assert '"global_step": 600' in summary
 
 
 @pytest.mark.parametrize("rows", [1, 2, 3, 16, 64, 128])
