@@ -105,7 +105,8 @@ def stacked_linear(x_SBI: torch.Tensor, w_SOI: torch.Tensor, b_SO: torch.Tensor)
     rows, inner = x_SBI.shape[1], x_SBI.shape[2]
     if rows * inner * w_SOI.shape[1] < SMALL_PRODUCT:
         x_SBI, w_SOI = aligned(x_SBI), aligned(w_SOI)  # each slice where a tensor alone starts
-        return torch.stack([F.linear(x_SBI[s], w_SOI[s], b_SO[s]) for s in range(len(w_SOI))])
+        slices = zip(x_SBI.unbind(0), w_SOI.unbind(0), b_SO.unbind(0), strict=True)
+        return torch.stack([F.linear(x, w, b) for x, w, b in slices])
     if torch.is_grad_enabled() and (w_SOI.requires_grad or x_SBI.requires_grad):
         return StackedLinear.apply(x_SBI, w_SOI, b_SO)  # type: ignore[no-any-return]
     return _affine(aligned(x_SBI), aligned(w_SOI), b_SO)
@@ -151,6 +152,13 @@ class StackedQNetwork(nn.Module):
             for name in self.names
         )
 
+        self._params = list(self.weights)
+
+    def _apply(self, fn: Any, recurse: bool = True) -> StackedQNetwork:
+        super()._apply(fn, recurse)
+        self._params = list(self.weights)  # a move may replace the tensors
+        return self
+
     @property
     def seeds(self) -> int:
         return int(self.weights[0].shape[0])
@@ -159,12 +167,11 @@ class StackedQNetwork(nn.Module):
         """Q (S, B, A) of each seed on its own rows; ``members`` picks some seeds' networks
         (``obs_SB`` then holds their rows only)."""
         x = obs_SB.float().flatten(2)
-        params = (
-            list(self.weights) if members == slice(None) else [p[members] for p in self.weights]
-        )
+        params = self._params if members == slice(None) else [p[members] for p in self._params]
         layers = [(params[i], params[i + 1]) for i in range(0, len(params), 2)]
+        relu = torch.relu if torch.is_grad_enabled() else torch.relu_  # in place: stays aligned
         for weight, bias in layers[:-1]:  # the torso: ReLU after each layer
-            x = torch.relu(stacked_linear(x, weight, bias))
+            x = relu(stacked_linear(x, weight, bias))
         weight, bias = layers[-1]  # the linear head
         return stacked_linear(x, weight, bias)
 
