@@ -296,16 +296,7 @@ class ReplayBuffer:
         ``recent``: draw only from the latest ``recent`` transitions over all streams.
         ``on_device``: observations gathered from the device mirror, when there is one.
         """
-        if k < 1:
-            raise ConfigError(f"k must be >= 1 (got {k})")
-        if recent is not None and recent > self.capacity * self.num_envs:
-            raise ConfigError(
-                f"recent window ({recent}) exceeds the replay capacity "
-                f"({self.capacity * self.num_envs})"
-            )
-        window = self.capacity if recent is None else max(1, recent // self.num_envs)
-        low_E = np.maximum(self._low(), self.count - window)
-        span_E = self.count - low_E
+        low_E, span_E = self.sample_span(k, recent, self.num_envs)
         if not (span_E > 0).any():
             raise ValueError("cannot sample from an empty replay buffer")
         chosen_e: list[np.ndarray] = []
@@ -332,6 +323,22 @@ class ReplayBuffer:
         e_B = np.concatenate(chosen_e)
         start_B = np.concatenate(chosen_l)
         return self.gather(e_B, start_B, k, gamma, on_device=on_device)
+
+    def sample_span(
+        self, k: int, recent: int | None, streams: int
+    ) -> tuple[np.ndarray, np.ndarray]:
+        """The first row a minibatch may start at in each stream, and how many rows follow it:
+        the whole live replay, or with ``recent`` the latest ``recent`` transitions of a run of
+        ``streams`` streams (split evenly between them). Checks ``k`` and ``recent``."""
+        if k < 1:
+            raise ConfigError(f"k must be >= 1 (got {k})")
+        if recent is not None and recent > self.capacity * streams:
+            raise ConfigError(
+                f"recent window ({recent}) exceeds the replay capacity ({self.capacity * streams})"
+            )
+        window = self.capacity if recent is None else max(1, recent // streams)
+        low_E = np.maximum(self._low(), self.count - window)
+        return low_E, self.count - low_E
 
     def gather(
         self, e_B: np.ndarray, start_B: np.ndarray, k: int, gamma: float, on_device: bool = False

@@ -64,16 +64,8 @@ class SeedReplay(ReplayBuffer):
     ) -> Batch:
         """``batch_size`` valid k-step windows per seed, drawn as :meth:`ReplayBuffer.sample`
         draws them for that seed alone; the rows of seed 0, then seed 1, ..."""
-        if k < 1:
-            raise ConfigError(f"k must be >= 1 (got {k})")
         E = self.per_seed
-        if recent is not None and recent > self.capacity * E:
-            raise ConfigError(
-                f"recent window ({recent}) exceeds the replay capacity ({self.capacity * E})"
-            )
-        window = self.capacity if recent is None else max(1, recent // E)
-        low_all = np.maximum(self._low(), self.count - window)
-        span_all = self.count - low_all
+        low_all, span_all = self.sample_span(k, recent, E)
         if not all((span_all[self._streams(s)] > 0).any() for s in range(self.seeds)):
             raise ValueError("cannot sample from an empty replay buffer")
         chosen: list[list[tuple[np.ndarray, np.ndarray]]] = [[] for _ in range(self.seeds)]
