@@ -33,33 +33,43 @@ operands start: seed s's slice of a plain (S, ...) tensor starts wherever s time
 it, and its products round otherwise than the same matrix alone."""
 
 
+def _strides(shape: Sequence[int]) -> tuple[int, ...]:
+    """Row-major strides of ``shape``."""
+    out, step = [], 1
+    for size in reversed(shape):
+        out.append(step)
+        step *= size
+    return tuple(reversed(out))
+
+
 def aligned_empty(shape: Sequence[int], like: torch.Tensor) -> torch.Tensor:
     """An uninitialised (S, ...) tensor whose seed slices are each contiguous and start on an
     :data:`ALIGN` boundary (a padded seed stride)."""
     S, *rest = shape
-    size = 1
-    for d in rest:
-        size *= d
+    inner = _strides(rest)
+    size = inner[0] * rest[0] if rest else 1
     stride = -(-size // ALIGN) * ALIGN
     buf = torch.empty(S * stride + ALIGN, dtype=like.dtype, device=like.device)
     start = (-buf.data_ptr() // buf.element_size()) % ALIGN if buf.device.type == "cpu" else 0
-    inner = torch.empty(rest).stride() if rest else ()
     return buf.as_strided((S, *rest), (stride, *inner), start)
 
 
 def aligned(t: torch.Tensor) -> torch.Tensor:
     """``t`` when each seed's slice is contiguous and starts on an :data:`ALIGN` boundary, else a
     copy laid out so (CPU only: elsewhere ``t``)."""
-    if t.device.type != "cpu":
+    if t.is_cuda:
         return t
-    inner = 1
-    for size, stride in zip(reversed(t.shape[1:]), reversed(t.stride()[1:]), strict=True):
-        if stride != inner and size > 1:
-            break
-        inner *= size
-    else:
-        if t.stride(0) % ALIGN == 0 and (t.data_ptr() // t.element_size()) % ALIGN == 0:
-            return t
+    shape, strides = t.shape, t.stride()
+    ok = strides[0] % ALIGN == 0 and (t.data_ptr() // t.element_size()) % ALIGN == 0
+    if ok:
+        step = 1
+        for i in range(len(shape) - 1, 0, -1):  # each slice contiguous (size-1 axes any stride)
+            if shape[i] != 1 and strides[i] != step:
+                ok = False
+                break
+            step *= shape[i]
+    if ok:
+        return t
     out = aligned_empty(t.shape, t)
     out.copy_(t)
     return out
