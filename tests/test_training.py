@@ -233,3 +233,18 @@ def test_overlap_env_needs_environments_that_step_asynchronously(tmp_path: Path)
         farsighter.train(tiny("ddqn", tmp_path / "run", overlap_env="on"))
     assert not (tmp_path / "run").exists()
     sync.close()
+
+
+@pytest.mark.parametrize("num_actions", [2, 3, 18])
+def test_epsilon_draws_for_one_environment_are_numpys_array_draws(num_actions: int) -> None:
+    """The scalar draws of one environment give the numbers of rng.random(1) and
+    rng.integers(0, A, size=1), and leave the generator where those leave it."""
+    from farsighter.agents.common import epsilon_draws
+
+    mine, numpys = np.random.default_rng(3), np.random.default_rng(3)
+    for _ in range(500):
+        coins, actions = epsilon_draws(mine, num_actions, 1)
+        assert coins.tolist() == numpys.random(1).tolist()
+        assert actions.tolist() == numpys.integers(0, num_actions, size=1).tolist()
+        assert actions.dtype == np.int64
+    assert mine.bit_generator.state == numpys.bit_generator.state

@@ -25,6 +25,7 @@ from farsighter.agents.common import (
     batch_tensors,
     build_seeded,
     elementwise_td_loss,
+    epsilon_draws,
     linear_schedule,
     make_optimizer,
     row_bytes,
@@ -122,7 +123,7 @@ class SeedBatchDDQN:
         greedy_SE = self.greedy(obs_SE)  # draws nothing: the generators see what they see alone
         n = obs_SE.shape[1]
         # epsilon_greedy's draws, seed by seed from its own generator: the coins, then the actions
-        draws = [(rng.random(n), rng.integers(0, self.num_actions, size=n)) for rng in self.rngs]
+        draws = [epsilon_draws(rng, self.num_actions, n) for rng in self.rngs]
         random_SE = np.stack([coins for coins, _ in draws]) < self.epsilon
         return np.where(random_SE, np.stack([actions for _, actions in draws]), greedy_SE)
 
