@@ -20,6 +20,7 @@ and per seed (logging, evaluation, checkpoints) is :mod:`farsighter.session`'s, 
 from __future__ import annotations
 
 import dataclasses
+import sys
 from collections.abc import Sequence
 from pathlib import Path
 from typing import Any
@@ -83,6 +84,8 @@ def train_seeds(
     summaries: dict[int, dict[str, Any]] = {}
     for group in _groups(cfgs) if batched else [[c] for c in cfgs]:
         reason = _batch_refusal(group[0], resolve_device(group[0].device)) if len(group) > 1 else ""
+        if reason:
+            print(f"farsighter: {reason}; these {len(group)} seeds train in turn", file=sys.stderr)
         if reason or len(group) == 1:
             for cfg in group:
                 summaries[cfg.seed] = train(cfg, callbacks=hooks[cfg.seed])
