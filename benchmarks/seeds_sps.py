@@ -14,6 +14,11 @@ count for the run alone and the batch. Rounds interleave the entries, so that th
 falls on all of them alike.
 
     python -m benchmarks.seeds_sps [--tasks cartpole deepsea] [--seeds 16] [--rounds 2]
+
+``--phases`` instead times where a batch step goes (one child per task, 16 seeds, one thread):
+microseconds per batch step in the batch's ``greedy`` forward, the rest of ``act`` (each seed's
+epsilon draws), the environments' ``step``, ``observe``, ``learn``, the seeds' run logs and the
+rest of the loop (``seeds_profile.json``).
 """
 
 from __future__ import annotations
@@ -93,12 +98,79 @@ def run_one(
     }
 
 
-def measure(task: str, seeds: int, threads: int) -> dict[str, Any]:
+PHASES = ("greedy", "act", "env.step", "observe", "learn", "log.step")
+
+
+def profile_one(env: str, steps: int, values: dict[str, Any], seeds: int) -> dict[str, Any]:
+    """One batch run with timers around its phases (in this process)."""
+    from collections import defaultdict
+
+    import torch
+
+    import farsighter.seeds as seeds_module
+    from farsighter import make_config
+    from farsighter.agents.ddqn_seeds import SeedBatchDDQN
+    from farsighter.session import RunLog
+
+    torch.set_num_threads(1)
+    spent: dict[str, float] = defaultdict(float)
+
+    def timed(name: str, fn: Any) -> Any:
+        def wrapper(*args: Any, **kwargs: Any) -> Any:
+            t0 = time.perf_counter()
+            try:
+                return fn(*args, **kwargs)
+            finally:
+                spent[name] += time.perf_counter() - t0
+
+        return wrapper
+
+    for name in ("greedy", "act", "observe", "learn"):
+        setattr(SeedBatchDDQN, name, timed(name, getattr(SeedBatchDDQN, name)))
+    RunLog.step = timed("log.step", RunLog.step)  # type: ignore[method-assign]
+    make_vector_env = seeds_module.make_vector_env
+
+    def timed_envs(*args: Any, **kwargs: Any) -> Any:
+        envs = make_vector_env(*args, **kwargs)
+        envs.step = timed("env.step", envs.step)
+        return envs
+
+    seeds_module.make_vector_env = timed_envs
+    with tempfile.TemporaryDirectory() as tmp:
+        cfg = make_config(
+            "ddqn",
+            env,
+            total_steps=steps,
+            run_dir=f"{tmp}/run",
+            torch_threads=1,
+            device="cpu",
+            eval_every=0,
+            eval_episodes=1,
+            progress=False,
+            **values,
+        )
+        start = time.perf_counter()
+        seeds_module.train_seeds(seeds_module.seed_configs(cfg, list(range(1, seeds + 1))))
+        wall = time.perf_counter() - start
+    us = {name: round(1e6 * spent[name] / steps, 1) for name in PHASES}
+    us["act"] = round(us["act"] - us["greedy"], 1)  # act's own work: the epsilon draws
+    us["rest"] = round(1e6 * wall / steps - sum(us.values()), 1)
+    return {"env": env, "seeds": seeds, "steps_per_seed": steps, "us_per_batch_step": us}
+
+
+def measure(task: str, seeds: int, threads: int, phases: bool = False) -> dict[str, Any]:
     from benchmarks.atari_sps import child_env, fail, run_child
 
     env_id, steps, values = task_spec(task)
     spec = json.dumps(
-        {"env": env_id, "steps": steps, "values": values, "seeds": seeds, "threads": threads}
+        {
+            "env": env_id,
+            "steps": steps,
+            "values": values,
+            "seeds": seeds,
+            "threads": threads,
+            "phases": phases,
+        }
     )
     cmd = [sys.executable, str(Path(__file__).resolve()), "--one", spec]
     env = {**child_env(threads), "PYTHONPATH": str(REPO)}
@@ -115,15 +187,28 @@ def main() -> None:
     p.add_argument("--seeds", type=int, default=16, help="seeds in the batch")
     p.add_argument("--rounds", type=int, default=2)
     p.add_argument("--name", default="seeds_sps")
+    p.add_argument("--phases", action="store_true", help="time the phases of a batch step")
     p.add_argument("--one", help=argparse.SUPPRESS)  # internal: one run, JSON spec
     args = p.parse_args()
     if args.one is not None:
         spec = json.loads(args.one)
         values = {k: tuple(v) if isinstance(v, list) else v for k, v in spec["values"].items()}
-        row = run_one(spec["env"], spec["steps"], values, spec["seeds"], spec["threads"])
+        if spec.get("phases"):
+            row = profile_one(spec["env"], spec["steps"], values, spec["seeds"])
+        else:
+            row = run_one(spec["env"], spec["steps"], values, spec["seeds"], spec["threads"])
         print(TAG + json.dumps(row))
         return
     from benchmarks.common import write_result
+
+    if args.phases:
+        rows = []
+        for task in args.tasks:
+            print(f"{task}: phases of a {args.seeds}-seed batch step", file=sys.stderr, flush=True)
+            rows.append({**measure(task, args.seeds, 1, phases=True), "task": task})
+            print(f"  {rows[-1]['us_per_batch_step']}", file=sys.stderr, flush=True)
+        write_result("seeds_profile" if args.name == "seeds_sps" else args.name, {"runs": rows})
+        return
 
     entries = [(0, 1), (args.seeds, 1), (args.seeds, 2)]  # (seeds, threads); 0 = alone
     runs = []
