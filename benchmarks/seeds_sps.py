@@ -47,12 +47,29 @@ def task_spec(task: str) -> tuple[str, int, dict[str, Any]]:
     return "farsighter/DeepSea20-v0", 10_000, {}
 
 
+def _config(env: str, steps: int, values: dict[str, Any], tmp: str, threads: int) -> Any:
+    """DDQN on ``env`` as every entry runs it: CPU, no evaluation before the final one, quiet."""
+    from farsighter import make_config
+
+    return make_config(
+        "ddqn",
+        env,
+        total_steps=steps,
+        run_dir=f"{tmp}/run",
+        torch_threads=threads,
+        device="cpu",
+        eval_every=0,
+        eval_episodes=1,
+        progress=False,
+        **values,
+    )
+
+
 def run_one(
     env: str, steps: int, values: dict[str, Any], seeds: int, threads: int
 ) -> dict[str, Any]:
     import torch
 
-    from farsighter import make_config
     from farsighter.seeds import seed_configs, train_seeds
     from farsighter.session import RunLog
     from farsighter.train import train
@@ -67,18 +84,7 @@ def run_one(
 
     RunLog.end_of_training = mark_end  # type: ignore[method-assign]
     with tempfile.TemporaryDirectory() as tmp:
-        cfg = make_config(
-            "ddqn",
-            env,
-            total_steps=steps,
-            run_dir=f"{tmp}/run",
-            torch_threads=threads,
-            device="cpu",
-            eval_every=0,
-            eval_episodes=1,
-            progress=False,
-            **values,
-        )
+        cfg = _config(env, steps, values, tmp, threads)
         start = time.perf_counter()
         if seeds == 0:
             summaries = [train(dataclasses.replace(cfg, seed=1))]
@@ -108,22 +114,13 @@ def profile_one(env: str, steps: int, values: dict[str, Any], seeds: int) -> dic
     import torch
 
     import farsighter.seeds as seeds_module
-    from farsighter import make_config
+    from benchmarks.small_profile import phase_timer
     from farsighter.agents.ddqn_seeds import SeedBatchDDQN
     from farsighter.session import RunLog
 
     torch.set_num_threads(1)
     spent: dict[str, float] = defaultdict(float)
-
-    def timed(name: str, fn: Any) -> Any:
-        def wrapper(*args: Any, **kwargs: Any) -> Any:
-            t0 = time.perf_counter()
-            try:
-                return fn(*args, **kwargs)
-            finally:
-                spent[name] += time.perf_counter() - t0
-
-        return wrapper
+    timed = phase_timer(spent)
 
     for name in ("greedy", "act", "observe", "learn"):
         setattr(SeedBatchDDQN, name, timed(name, getattr(SeedBatchDDQN, name)))
@@ -137,18 +134,7 @@ def profile_one(env: str, steps: int, values: dict[str, Any], seeds: int) -> dic
 
     seeds_module.make_vector_env = timed_envs
     with tempfile.TemporaryDirectory() as tmp:
-        cfg = make_config(
-            "ddqn",
-            env,
-            total_steps=steps,
-            run_dir=f"{tmp}/run",
-            torch_threads=1,
-            device="cpu",
-            eval_every=0,
-            eval_episodes=1,
-            progress=False,
-            **values,
-        )
+        cfg = _config(env, steps, values, tmp, 1)
         start = time.perf_counter()
         seeds_module.train_seeds(seeds_module.seed_configs(cfg, list(range(1, seeds + 1))))
         wall = time.perf_counter() - start

@@ -46,6 +46,22 @@ def task_spec(task: str) -> tuple[str, int, dict[str, Any]]:
     return "farsighter/DeepSea20-v0", 20_000, {}
 
 
+def phase_timer(seconds: dict[str, float]) -> Any:
+    """``timed(name, fn)``: ``fn`` wrapped to add its wall time to ``seconds[name]``."""
+
+    def timed(name: str, fn: Any) -> Any:
+        def wrapper(*args: Any, **kwargs: Any) -> Any:
+            t0 = time.perf_counter()
+            try:
+                return fn(*args, **kwargs)
+            finally:
+                seconds[name] += time.perf_counter() - t0
+
+        return wrapper
+
+    return timed
+
+
 def profile(algo: str, env: str, steps: int, values: dict[str, Any]) -> dict[str, Any]:
     """One run with phase timers (in this process: the package on sys.path is measured)."""
     import importlib
@@ -58,16 +74,7 @@ def profile(algo: str, env: str, steps: int, values: dict[str, Any]) -> dict[str
     train_module = importlib.import_module("farsighter.train")
     torch.set_num_threads(1)
     seconds: dict[str, float] = defaultdict(float)
-
-    def timed(name: str, fn: Any) -> Any:
-        def wrapper(*args: Any, **kwargs: Any) -> Any:
-            t0 = time.perf_counter()
-            try:
-                return fn(*args, **kwargs)
-            finally:
-                seconds[name] += time.perf_counter() - t0
-
-        return wrapper
+    timed = phase_timer(seconds)
 
     agent_cls = importlib.import_module(f"farsighter.agents.{algorithms.get(algo).agent}").AGENT
     for name in ("act", "observe", "learn"):

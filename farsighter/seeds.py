@@ -37,15 +37,8 @@ from farsighter.errors import ConfigError
 from farsighter.replay import VectorStep
 from farsighter.rundir import check_same_run, load_checkpoint, prepare_run_dir
 from farsighter.runtime import prepare_process
-from farsighter.session import (
-    LoopState,
-    RunLog,
-    final_observations,
-    passed_multiple,
-    restore_run,
-    save_run,
-)
-from farsighter.train import POLICY_FILE, Callback, resolve_device, train
+from farsighter.session import Callback, LoopState, RunLog, final_observations, restore_run
+from farsighter.train import resolve_device, train
 
 __all__ = ["batchable", "seed_configs", "train_seeds"]
 
@@ -191,30 +184,15 @@ def _train_batch(
             metrics = batch.learn(step)
             for run, member, info, mine in zip(runs, members, infos, metrics, strict=True):
                 run.state.global_step = step
-                for callback in run.callbacks:
-                    callback.on_step(step, info, member)
-                run.log.step(run.state, info, mine, member)
-                if passed_multiple(prev, step, cfg.eval_every):
-                    run.log.evaluate(run.state, member)
-                if passed_multiple(prev, step, cfg.checkpoint_every) and step < cfg.total_steps:
-                    save_run(run.path, run.cfg, run.state, member, run.envs, run.obs)
+                run.log.after_step(
+                    run.state, prev, info, mine, member, run.envs, run.obs, run.callbacks
+                )
             bar.update(cfg.num_envs * len(runs))
-        return [_finish(run, member) for run, member in zip(runs, members, strict=True)]
+        for run, member in zip(runs, members, strict=True):
+            run.log.finish(run.state, member, run.envs, run.obs, run.callbacks)
+        return [run.log.summary(run.state) for run in runs]
     finally:
         bar.close()
         for run in runs:
             run.log.close()
             run.envs.close()
-
-
-def _finish(run: _Seed, member: Any) -> dict[str, Any]:
-    """What ``train`` does after its last step, for one seed."""
-    state, cfg = run.state, run.cfg
-    run.log.end_of_training()
-    if state.evals == 0 or (cfg.eval_every and state.global_step % cfg.eval_every):
-        run.log.evaluate(state, member)
-    save_run(run.path, cfg, state, member, run.envs, run.obs)
-    torch.save(member.state_dict(include_replay=False), run.path / POLICY_FILE)
-    for callback in run.callbacks:
-        callback.on_finish(run.path, member)
-    return run.log.summary(state)

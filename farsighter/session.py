@@ -12,7 +12,7 @@ from collections import deque
 from collections.abc import Mapping, Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Any
+from typing import Any, Protocol
 
 import gymnasium as gym
 import numpy as np
@@ -24,8 +24,17 @@ from farsighter.config import Config
 from farsighter.errors import RunDirError
 from farsighter.rundir import SUMMARY_FILE, RunLogger, load_checkpoint, save_checkpoint
 
+POLICY_FILE = "policy.pt"  # the trained agent without its replay, for acting
 CHECKPOINT_VERSION = 2  # 2: agents save their counters as one dataclass (v0.3)
 RECENT = 20  # episodes in the progress bar's and the summary's recent mean
+
+
+class Callback(Protocol):
+    """Observes a run without changing it (studies use it to record what the loop does not)."""
+
+    def on_step(self, global_step: int, info: dict[str, Any], agent: Agent) -> None: ...
+
+    def on_finish(self, run_dir: Path, agent: Agent) -> None: ...
 
 
 @dataclass
@@ -362,6 +371,47 @@ class RunLog:
         )
         log.scalar("eval/mean_return", mean, step)
         log.scalar("eval/std_return", std, step)
+
+    def after_step(
+        self,
+        state: LoopState,
+        prev_step: int,
+        info: dict[str, Any],
+        metrics: dict[str, torch.Tensor],
+        agent: Agent,
+        envs: gym.vector.VectorEnv,
+        obs: Any,
+        callbacks: Sequence[Callback],
+    ) -> None:
+        """What follows a vector step (from ``prev_step`` to ``state.global_step``): the
+        callbacks, :meth:`step`, and the evaluation and the checkpoint when one is due."""
+        cfg, step = self.cfg, state.global_step
+        for callback in callbacks:
+            callback.on_step(step, info, agent)
+        self.step(state, info, metrics, agent)
+        if passed_multiple(prev_step, step, cfg.eval_every):
+            self.evaluate(state, agent)
+        if passed_multiple(prev_step, step, cfg.checkpoint_every) and step < cfg.total_steps:
+            save_run(self.path, cfg, state, agent, envs, obs)
+
+    def finish(
+        self,
+        state: LoopState,
+        agent: Agent,
+        envs: gym.vector.VectorEnv,
+        obs: Any,
+        callbacks: Sequence[Callback],
+    ) -> None:
+        """After the last step: a final evaluation unless one was just made, the last
+        checkpoint, the policy file, and the callbacks' ``on_finish``."""
+        cfg = self.cfg
+        self.end_of_training()
+        if state.evals == 0 or (cfg.eval_every and state.global_step % cfg.eval_every):
+            self.evaluate(state, agent)  # always finish with an evaluation
+        save_run(self.path, cfg, state, agent, envs, obs)
+        torch.save(agent.state_dict(include_replay=False), self.path / POLICY_FILE)
+        for callback in callbacks:
+            callback.on_finish(self.path, agent)
 
     def end_of_training(self) -> None:
         """Marks the end of the steps (the final evaluation and checkpoint do not count in SPS)."""

@@ -161,17 +161,12 @@ class StackedQNetwork(nn.Module):
             nn.Parameter(_stacked([dict(net.named_parameters())[name].detach() for net in nets]))
             for name in self.names
         )
-
         self._params = list(self.weights)
 
     def _apply(self, fn: Any, recurse: bool = True) -> StackedQNetwork:
         super()._apply(fn, recurse)
         self._params = list(self.weights)  # a move may replace the tensors
         return self
-
-    @property
-    def seeds(self) -> int:
-        return int(self.weights[0].shape[0])
 
     def forward(self, obs_SB: torch.Tensor, members: slice = slice(None)) -> torch.Tensor:
         """Q (S, B, A) of each seed on its own rows; ``members`` picks some seeds' networks
@@ -217,7 +212,7 @@ def member_optimizer_state(opt: torch.optim.Optimizer, s: int) -> dict[str, Any]
     full = opt.state_dict()
     state = {
         index: {
-            key: (value[s].clone() if value.dim() > 0 else value.clone())
+            key: (value[s] if value.dim() else value).clone()
             if isinstance(value, torch.Tensor)
             else value
             for key, value in entry.items()

@@ -4,7 +4,7 @@ from __future__ import annotations
 
 from collections.abc import Sequence
 from pathlib import Path
-from typing import Any, Protocol
+from typing import Any
 
 import gymnasium as gym
 import numpy as np
@@ -19,19 +19,17 @@ from farsighter.replay import VectorStep
 from farsighter.rundir import CONFIG_FILE, check_same_run, load_checkpoint, prepare_run_dir
 from farsighter.runtime import prepare_process
 from farsighter.session import (
+    POLICY_FILE,
+    Callback,
     EvalResult,
     LoopState,
     RunLog,
     evaluate_episodes,
     final_observations,
-    passed_multiple,
     restore_run,
-    save_run,
 )
 
 __all__ = ["Callback", "EvalResult", "Policy", "evaluate_episodes", "load_agent", "train"]
-
-POLICY_FILE = "policy.pt"
 
 
 def resolve_device(name: str) -> torch.device:
@@ -54,14 +52,6 @@ def overlap_enabled(setting: str, envs: gym.vector.VectorEnv, device: torch.devi
             f"backend); {type(envs).__name__} steps in the loop's thread; use auto or off"
         )
     return setting == "on" or (setting == "auto" and can and device.type == "cuda")
-
-
-class Callback(Protocol):
-    """Observes a run without changing it (studies use it to record what the loop does not)."""
-
-    def on_step(self, global_step: int, info: dict[str, Any], agent: Agent) -> None: ...
-
-    def on_finish(self, run_dir: Path, agent: Agent) -> None: ...
 
 
 def train(cfg: Config, callbacks: Sequence[Callback] = ()) -> dict[str, Any]:
@@ -103,22 +93,8 @@ def train(cfg: Config, callbacks: Sequence[Callback] = ()) -> dict[str, Any]:
             obs = next_obs
             if not overlap:
                 metrics = agent.learn(state.global_step)
-            for callback in callbacks:
-                callback.on_step(state.global_step, info, agent)
-            log.step(state, info, metrics, agent)
-            if passed_multiple(prev_step, state.global_step, cfg.eval_every):
-                log.evaluate(state, agent)
-            if passed_multiple(prev_step, state.global_step, cfg.checkpoint_every) and (
-                state.global_step < cfg.total_steps
-            ):
-                save_run(path, cfg, state, agent, envs, obs)
-        log.end_of_training()
-        if state.evals == 0 or (cfg.eval_every and state.global_step % cfg.eval_every):
-            log.evaluate(state, agent)  # always finish with an evaluation
-        save_run(path, cfg, state, agent, envs, obs)
-        torch.save(agent.state_dict(include_replay=False), path / POLICY_FILE)
-        for callback in callbacks:
-            callback.on_finish(path, agent)
+            log.after_step(state, prev_step, info, metrics, agent, envs, obs, callbacks)
+        log.finish(state, agent, envs, obs, callbacks)
     finally:
         log.close()
         envs.close()

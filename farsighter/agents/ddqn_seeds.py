@@ -42,7 +42,6 @@ from farsighter.stacked import (
     StackedQNetwork,
     load_member_optimizer_state,
     member_optimizer_state,
-    stackable,
 )
 
 ALGOS = ("ddqn", "kddqn")
@@ -77,9 +76,7 @@ class SeedBatchDDQN:
             build_seeded(c.seed, lambda: QNetwork(obs_space, self.num_actions, cfg.hidden_sizes))
             for c in cfgs
         ]
-        if not all(stackable(net) for net in nets):
-            raise ValueError("SeedBatchDDQN needs fp32 MLP Q-networks")
-        self.q = StackedQNetwork(nets).to(device)
+        self.q = StackedQNetwork(nets).to(device)  # refuses networks it cannot stack
         # built again rather than deep-copied: a copy would lose the seeds' aligned layout
         self.q_target = StackedQNetwork(nets).to(device)
         self.q_target.requires_grad_(False)
@@ -129,8 +126,7 @@ class SeedBatchDDQN:
 
     def observe(self, steps: Sequence[VectorStep]) -> None:
         """One vector step of every seed, in seed order, into the seeds' streams."""
-        final = [None if st.final_obs_E is None else list(st.final_obs_E) for st in steps]
-        ended = any(f is not None for f in final)
+        ended = any(st.final_obs_E is not None for st in steps)
         self.replay.add(
             np.concatenate([st.obs_E for st in steps]),
             np.concatenate([st.action_E for st in steps]),
@@ -138,9 +134,11 @@ class SeedBatchDDQN:
             np.concatenate([st.terminated_E for st in steps]),
             np.concatenate([st.truncated_E for st in steps]),
             [
-                o
-                for st, f in zip(steps, final, strict=True)
-                for o in (f or [None] * len(st.reward_E))
+                final
+                for st in steps
+                for final in (
+                    st.final_obs_E if st.final_obs_E is not None else [None] * len(st.reward_E)
+                )
             ]
             if ended
             else None,
@@ -222,8 +220,6 @@ class SeedBatchDDQN:
 class SeedMember:
     """Seed ``s`` of a batch as an agent: what the run log, evaluation and checkpoints use."""
 
-    SAVED = ("q", "q_target", "opt", "rng", "counters")  # DDQNAgent's checkpoint keys
-
     def __init__(self, batch: SeedBatchDDQN, s: int) -> None:
         self.batch, self.s = batch, s
         self.cfg = batch.cfgs[s]
@@ -235,16 +231,18 @@ class SeedMember:
 
     def greedy(self, obs_E: np.ndarray) -> np.ndarray:
         """argmax_a Q(s, a) under this seed's network alone (its slice of the batch's)."""
-        b = self.batch
         with torch.inference_mode():
-            obs = torch.as_tensor(np.asarray(obs_E)).to(b.device).unsqueeze(0)
-            return b.q(obs, slice(self.s, self.s + 1)).argmax(dim=2)[0].cpu().numpy()
+            return self._q(obs_E).argmax(dim=1).cpu().numpy()
 
     @torch.no_grad()
     def q_estimate(self, obs_B: np.ndarray) -> tuple[np.ndarray, np.ndarray | None]:
+        return self._q(obs_B).cpu().numpy(), None
+
+    def _q(self, obs_B: np.ndarray) -> torch.Tensor:
+        """Q(s, .) of this seed's network, (B, A)."""
         b = self.batch
         obs = torch.as_tensor(np.asarray(obs_B)).to(b.device).unsqueeze(0)
-        return b.q(obs, slice(self.s, self.s + 1))[0].cpu().numpy(), None
+        return b.q(obs, slice(self.s, self.s + 1))[0]
 
     def observe(self, step: VectorStep) -> None:
         raise NotImplementedError("a seed of a batch records its steps through the batch")

@@ -26,7 +26,14 @@ import tyro
 from farsighter.config import Config, make_config, validate
 from farsighter.errors import ConfigError, FarsighterError
 from farsighter.rundir import slug
-from farsighter.sweep.engine import Backend, Progress, execute, parse_address, ray_init
+from farsighter.sweep.engine import (
+    Backend,
+    Progress,
+    chunk_by,
+    execute,
+    parse_address,
+    ray_init,
+)
 
 Runs = dict[str, list[dict[str, Any]]]
 """Per agent label, one dict per finished run: ``"seed"``, ``"steps"`` (its budget), ``"task"``
@@ -399,20 +406,15 @@ def seed_batches(study: Study, settings: Any, out: Path, jobs: Sequence[Job]) ->
     (:func:`farsighter.seeds.batchable`), every other job alone; in the order of ``jobs``."""
     from farsighter.seeds import batchable
 
-    together: dict[tuple[str, str | None], list[list[Job]]] = {}
-    groups: list[list[Job]] = []
-    for job in jobs:
-        chunks = together.get((job.label, job.task))
-        if chunks is None:
-            ok = batchable(study.config(settings, job, job.run_dir(out)))
-            chunks = together[(job.label, job.task)] = [] if ok else [[]]
-        if chunks == [[]] or not chunks or len(chunks[-1]) == SEEDS_PER_BATCH:
-            groups.append([job])
-            if chunks != [[]]:
-                chunks.append(groups[-1])
-            continue
-        chunks[-1].append(job)
-    return groups
+    batches: dict[tuple[str, str | None], bool] = {}
+
+    def key(job: Job) -> Any:
+        run = (job.label, job.task)
+        if run not in batches:
+            batches[run] = batchable(study.config(settings, job, job.run_dir(out)))
+        return run if batches[run] else job  # a job of its own where the agent has no batch
+
+    return chunk_by(jobs, key, SEEDS_PER_BATCH)
 
 
 def _run_jobs(

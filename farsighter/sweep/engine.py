@@ -31,13 +31,23 @@ import threading
 import time
 import traceback
 from collections import deque
-from collections.abc import Callable, Iterable, Iterator, Mapping, MutableMapping, Sequence
+from collections.abc import (
+    Callable,
+    Hashable,
+    Iterable,
+    Iterator,
+    Mapping,
+    MutableMapping,
+    Sequence,
+)
 from contextlib import contextmanager
 from dataclasses import dataclass
 from pathlib import Path
-from typing import IO, Any
+from typing import IO, Any, TypeVar
 
 from farsighter.errors import FarsighterError
+
+T = TypeVar("T")
 
 FATAL_EXIT = 3
 """Exit code of a worker whose job raised an input error: not retried."""
@@ -98,6 +108,20 @@ class Progress:
 
     def on_finish(self, run_dir: Path, agent: Any) -> None:
         self.progress[self.key] = -1
+
+
+def chunk_by(items: Sequence[T], key: Callable[[T], Hashable], size: int) -> list[list[T]]:
+    """``items`` in groups of at most ``size`` that share a ``key``, each group where its first
+    item stands (one process may take a group: the seeds of one run trained together)."""
+    open_groups: dict[Hashable, list[T]] = {}
+    groups: list[list[T]] = []
+    for item in items:
+        group = open_groups.get(key(item))
+        if group is None or len(group) == size:
+            group = open_groups[key(item)] = []
+            groups.append(group)
+        group.append(item)
+    return groups
 
 
 def execute(

@@ -33,7 +33,14 @@ import tyro
 
 from farsighter.errors import FarsighterError
 from farsighter.rundir import CHECKPOINT_FILE, EVAL_FILE, SUMMARY_FILE
-from farsighter.sweep.engine import Backend, Progress, execute, parse_address, ray_init
+from farsighter.sweep.engine import (
+    Backend,
+    Progress,
+    chunk_by,
+    execute,
+    parse_address,
+    ray_init,
+)
 from farsighter.sweep.spec import SweepError, SweepSpec, Trial, load_spec
 
 
@@ -218,15 +225,7 @@ def run_trials(
 
 def seed_groups(trials: Sequence[Trial], size: int) -> list[list[Trial]]:
     """``trials`` in groups of at most ``size`` that differ only in seed, in the sweep's order."""
-    groups: dict[Any, list[list[Trial]]] = {}
-    order: list[list[Trial]] = []
-    for trial in trials:
-        chunks = groups.setdefault(replace(trial, seed=0), [])
-        if not chunks or len(chunks[-1]) == size:
-            chunks.append([])
-            order.append(chunks[-1])
-        chunks[-1].append(trial)
-    return order
+    return chunk_by(trials, lambda trial: replace(trial, seed=0), size)
 
 
 def _start(trial: Trial, path: Path) -> Any:
