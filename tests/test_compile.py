@@ -58,7 +58,7 @@ def test_compiled_updates_equal_eager_updates(
     eager, eager_losses = _run(tmp_path / "eager", algo, False, **extra)
     first, first_losses = _run(tmp_path / "c1", algo, True, **extra)
     second, second_losses = _run(tmp_path / "c2", algo, True, **extra)
-    assert hasattr(first.step, "_torchdynamo_orig_callable")  # the step is compiled
+    assert hasattr(first.learner.step, "_torchdynamo_orig_callable")  # the step is compiled
     np.testing.assert_allclose(first_losses, eager_losses, rtol=1e-4, atol=1e-6)
     for a, b in zip(_params(first), _params(eager), strict=True):
         torch.testing.assert_close(a, b, rtol=1e-4, atol=1e-5)

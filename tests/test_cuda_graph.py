@@ -76,11 +76,11 @@ def test_blr_head_refreshes_its_float32_posterior_in_place() -> None:
 def test_what_the_captured_step_reads_is_updated_in_place(tmp_path: Path, algo: str) -> None:
     agent = _agent(tmp_path, algo, target_update_every=10, blr__posterior_every=10)
     online, target = (
-        (agent.q, agent.q_target) if algo == "ddqn" else (agent.torso, agent.torso_target)
+        (agent.q, agent.loss.q_target) if algo == "ddqn" else (agent.torso, agent.loss.torso_target)
     )
     tensors = list(online.parameters()) + list(target.parameters())
     if algo != "ddqn":
-        tensors += [agent.head.mean_AD, agent.target_mean_AD]
+        tensors += [agent.head.mean_AD, agent.loss.target_mean_AD]
     ptrs = [t.data_ptr() for t in tensors]
     target_before = [p.clone() for p in target.parameters()]
     _feed(agent, 200)
@@ -93,7 +93,9 @@ def test_what_the_captured_step_reads_is_updated_in_place(tmp_path: Path, algo: 
     )
     if algo != "ddqn":
         assert agent.counters.refreshes >= 5
-        torch.testing.assert_close(agent.target_mean_AD, agent.head.mean_AD)  # copied at line 8
+        torch.testing.assert_close(
+            agent.loss.target_mean_AD, agent.head.mean_AD
+        )  # copied at line 8
 
 
 def test_cuda_graph_setting_is_checked() -> None:
@@ -114,21 +116,21 @@ def test_cuda_graph_setting_is_checked() -> None:
 
 def test_eager_on_cpu_with_the_default_setting(tmp_path: Path) -> None:
     agent = _agent(tmp_path, "farsighter")
-    assert agent.graphs is False and not hasattr(agent.step, "replay")
-    assert all(g["capturable"] is False for g in agent.opt.param_groups)
+    assert agent.learner.graphs is False and not hasattr(agent.learner.step, "replay")
+    assert all(g["capturable"] is False for g in agent.learner.opt.param_groups)
 
 
 def test_set_capturable_follows_a_loaded_state(tmp_path: Path) -> None:
     agent = _agent(tmp_path, "ddqn")
     _feed(agent, 100)
     agent.learn(20)
-    state = agent.opt.state_dict()
+    state = agent.learner.opt.state_dict()
     for g in state["param_groups"]:
         g["capturable"] = True  # as a GPU run with graphs saves it
-    agent.opt.load_state_dict(state)
-    set_capturable(agent.opt, False)
-    assert all(g["capturable"] is False for g in agent.opt.param_groups)
-    steps = [s["step"] for s in agent.opt.state.values()]
+    agent.learner.opt.load_state_dict(state)
+    set_capturable(agent.learner.opt, False)
+    assert all(g["capturable"] is False for g in agent.learner.opt.param_groups)
+    steps = [s["step"] for s in agent.learner.opt.state.values()]
     assert steps and all(s.device.type == "cpu" and s.dtype == torch.float32 for s in steps)
     agent.learn(40)  # the optimizer steps again on the CPU
 
@@ -169,7 +171,7 @@ def test_graphed_updates_equal_eager_updates(
                 losses.append(float(m["td_loss"]))
         runs.append((agent, losses))
     (eager, eager_losses), (graphed, graphed_losses) = runs
-    assert graphed.step.captures >= 1 and graphed.step.replays >= 100
+    assert graphed.learner.step.captures >= 1 and graphed.learner.step.replays >= 100
     np.testing.assert_allclose(graphed_losses, eager_losses, rtol=1e-4, atol=1e-6)
     for a, b in zip(_params(graphed), _params(eager), strict=True):
         torch.testing.assert_close(a, b, rtol=1e-4, atol=1e-5)
@@ -214,7 +216,7 @@ def test_an_agent_loaded_from_another_continues_as_it_would(tmp_path: Path, devi
         for step in range(31, 61):
             agent.learn(step)
     if device == "cuda":
-        assert a.step.captures == 2
+        assert a.learner.step.captures == 2
     for x, y in zip(_params(a), _params(b), strict=True):
         torch.testing.assert_close(x, y, rtol=1e-4, atol=1e-5)
 

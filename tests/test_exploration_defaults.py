@@ -12,7 +12,7 @@ import numpy as np
 import pytest
 import torch
 
-from farsighter.agents import farsighter as farsighter_module
+from farsighter.agents import farsighter_loss as farsighter_module
 from farsighter.agents.common import td_loss
 from farsighter.agents.farsighter import FarsighterAgent
 from farsighter.config import PRESETS, make_config, validate
@@ -208,13 +208,14 @@ def test_sample_target_adds_the_posterior_spread(tmp_path: Path) -> None:
     agent = make_agent(tmp_path, blr__target="sample", blr__prior_std=5.0, k=1)
     mean_agent = make_agent(tmp_path, blr__target="mean", blr__prior_std=5.0, k=1)
     mean_agent.torso.load_state_dict(agent.torso.state_dict())
-    mean_agent.torso_target.load_state_dict(agent.torso_target.state_dict())
+    mean_agent.loss.torso_target.load_state_dict(agent.loss.torso_target.state_dict())
     from farsighter.agents.common import TensorBatch
 
     n = 4_000
     obs = torch.zeros(n, 4) + 0.5
     t = TensorBatch(obs, obs, torch.zeros(n, dtype=torch.int64), torch.zeros(n), torch.ones(n))
-    y_sample, y_mean = agent._targets(t), mean_agent._targets(t)
+    y_sample = agent.loss.targets(t, agent._draws(n))
+    y_mean = mean_agent.loss.targets(t, mean_agent._draws(n))
     assert torch.allclose(y_mean, y_mean[:1].expand(n))  # no randomness under the mean
     assert y_sample.std() > 0.5  # one draw per row
     assert y_sample.mean() > y_mean[0]  # the max over noisy values is optimistic
@@ -239,10 +240,10 @@ def test_k_target_max_is_the_larger_of_the_k_and_one_step_targets(
             )
         )
     captured: dict[str, list[torch.Tensor]] = {"ys": [], "trained": []}
-    original = agent._targets
+    original = agent.loss.targets
 
-    def spy(t, *draws):  # record every target computed during one update
-        y = original(t, *draws)
+    def spy(t, *args):  # record every target computed during one update
+        y = original(t, *args)
         captured["ys"].append(y)
         return y
 
@@ -250,7 +251,7 @@ def test_k_target_max_is_the_larger_of_the_k_and_one_step_targets(
         captured["trained"].append(y.detach().clone())
         return td_loss(q, y, kind)
 
-    agent._targets = spy  # type: ignore[method-assign]
+    agent.loss.targets = spy  # type: ignore[method-assign]
     monkeypatch.setattr(farsighter_module, "td_loss", loss_spy)
     agent.update()
     y_k, y_1 = captured["ys"]
@@ -312,10 +313,10 @@ def test_the_general_learner_trains_on_the_whole_replay_with_adam(tmp_path: Path
     """The default (general) learner draws its minibatches from the whole replay, where Table
     1's (control) draws them from the latest N = 1,000 transitions (Algorithm 1 line 4)."""
     rows, stored, agent = _sampled_rows("general", tmp_path)
-    assert isinstance(agent.opt, torch.optim.Adam) and len(rows) == 20 * 64
+    assert isinstance(agent.learner.opt, torch.optim.Adam) and len(rows) == 20 * 64
     assert rows.min() < stored - 1_000 - 500  # reaches well behind any latest-N window
     rows, stored, agent = _sampled_rows("control", tmp_path)
-    assert isinstance(agent.opt, torch.optim.RMSprop) and len(rows) == 20 * 32
+    assert isinstance(agent.learner.opt, torch.optim.RMSprop) and len(rows) == 20 * 32
     assert rows.min() >= stored - 1_000
 
 

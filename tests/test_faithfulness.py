@@ -78,7 +78,7 @@ def test_refresh_comes_before_the_target_sync(tmp_path: Path) -> None:
     agent.learn(200)  # both fall here
     assert agent.head.num_refreshes == 1
     assert not torch.allclose(agent.head.mean_AD, before)
-    assert torch.equal(agent.target_mean_AD, agent.head.mean_AD)
+    assert torch.equal(agent.loss.target_mean_AD, agent.head.mean_AD)
 
 
 # ------------------------------------------------------------------ target invariants (item 8)
@@ -90,15 +90,17 @@ def test_farsighter_targets_use_the_target_torso_and_target_mean(tmp_path: Path)
     agent: FarsighterAgent = cartpole_agent(tmp_path, "farsighter", k=3)
     feed(agent, 300)
     agent.refresh_posterior()
-    agent.target_mean_AD = agent.head.mean_AD.clone()
+    agent.loss.target_mean_AD = agent.head.mean_AD.clone()
     perturb(agent.torso)  # online and target now differ, in torso and in mean
     agent.head.set_mean(agent.head.mean_AD + 0.3)
     t = minibatch(agent, k=3)
     with torch.no_grad():
         a_star = (agent.torso(t.next_obs_B) @ agent.head.mean_AD.T).argmax(1)
-        q_tgt = agent.torso_target(t.next_obs_B) @ agent.target_mean_AD.T
+        q_tgt = agent.loss.torso_target(t.next_obs_B) @ agent.loss.target_mean_AD.T
         expected = t.returns_B + t.bootstrap_B * q_tgt.gather(1, a_star[:, None])[:, 0]
-    assert torch.allclose(agent._targets(t), expected, atol=1e-5)
+    assert torch.allclose(
+        agent.loss.targets(t, agent._draws(len(t.actions_B))), expected, atol=1e-5
+    )
 
 
 def test_ddqn_targets_evaluate_with_the_target_network(tmp_path: Path) -> None:
@@ -110,10 +112,10 @@ def test_ddqn_targets_evaluate_with_the_target_network(tmp_path: Path) -> None:
     t = minibatch(agent)
     with torch.no_grad():
         a_star = agent.q(t.next_obs_B).argmax(1)
-        q_tgt = agent.q_target(t.next_obs_B).gather(1, a_star[:, None])[:, 0]
+        q_tgt = agent.loss.q_target(t.next_obs_B).gather(1, a_star[:, None])[:, 0]
         wrong = agent.q(t.next_obs_B).max(1).values
     expected = t.returns_B + t.bootstrap_B * q_tgt
-    y = agent.targets(t)
+    y = agent.loss.targets(t)
     assert torch.allclose(y, expected, atol=1e-5)
     assert not torch.allclose(y, t.returns_B + t.bootstrap_B * wrong, atol=1e-3)
 
@@ -256,10 +258,12 @@ def test_thompson_target_uses_the_acting_draw(tmp_path: Path) -> None:
     t = minibatch(agent)
     with torch.no_grad():
         a_star = (agent.torso(t.next_obs_B) @ w_AD.T).argmax(1)
-        q_tgt = agent.torso_target(t.next_obs_B) @ agent.target_mean_AD.T
+        q_tgt = agent.loss.torso_target(t.next_obs_B) @ agent.loss.target_mean_AD.T
     expected = t.returns_B + t.bootstrap_B * q_tgt.gather(1, a_star[:, None])[:, 0]
     draws = agent.counters.draws
-    assert torch.allclose(agent._targets(t), expected, atol=1e-5)
+    assert torch.allclose(
+        agent.loss.targets(t, agent._draws(len(t.actions_B))), expected, atol=1e-5
+    )
     assert agent.counters.draws == draws  # the target made no new draw
 
 
@@ -271,9 +275,9 @@ def test_posterior_max_target_and_uniform_sampling(tmp_path: Path) -> None:
     perturb(agent.torso)
     t = minibatch(agent)
     with torch.no_grad():
-        q_tgt = agent.torso_target(t.next_obs_B) @ agent.target_mean_AD.T
+        q_tgt = agent.loss.torso_target(t.next_obs_B) @ agent.loss.target_mean_AD.T
     expected = t.returns_B + t.bootstrap_B * q_tgt.max(1).values
-    assert torch.allclose(agent._posterior_targets(t), expected, atol=1e-5)
+    assert torch.allclose(agent.loss.posterior_targets(t, {}), expected, atol=1e-5)
     e_N, l_N = agent.replay.uniform_indices(5_000, np.random.default_rng(0))
     assert l_N.min() < 20 and l_N.max() > 280  # the whole buffer, not the latest D rows
     assert len(np.unique(l_N)) < len(l_N)  # with replacement

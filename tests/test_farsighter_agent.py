@@ -68,15 +68,17 @@ def test_posterior_refresh_shrinks_variance_and_target_mean_stays(tmp_path: Path
     feed(agent, 600)
     phi = agent.torso(torch.randn(32, 4))
     before = agent.head.predictive_var(phi).mean().item()
-    target_before = agent.target_mean_AD.clone()
+    target_before = agent.loss.target_mean_AD.clone()
     agent.refresh_posterior()
     assert agent.head.num_refreshes == 1
     assert agent.head.predictive_var(phi).mean().item() < before
-    assert torch.equal(agent.target_mean_AD, target_before)  # only copied every N steps
-    torso_target = {k: v.clone() for k, v in agent.torso_target.state_dict().items()}
+    assert torch.equal(agent.loss.target_mean_AD, target_before)  # only copied every N steps
+    torso_target = {k: v.clone() for k, v in agent.loss.torso_target.state_dict().items()}
     for _ in range(10):
         agent.update()
-    assert all(torch.equal(torso_target[k], v) for k, v in agent.torso_target.state_dict().items())
+    assert all(
+        torch.equal(torso_target[k], v) for k, v in agent.loss.torso_target.state_dict().items()
+    )
 
 
 def test_adaptive_k_moves_and_empties_buffer(tmp_path: Path) -> None:

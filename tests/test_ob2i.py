@@ -134,14 +134,14 @@ def test_bonus_is_zero_when_all_heads_agree(tmp_path: Path, separate: bool) -> N
         for k in range(1, 10):
             for p_k, p_0 in zip(_head_params(agent.q, k), _head_params(agent.q, 0), strict=True):
                 p_k.copy_(p_0)
-    agent.q_target.load_state_dict(agent.q.state_dict())
+    agent.loss.q_target.load_state_dict(agent.q.state_dict())
     _fill(agent, [7])
     ep = agent.replay.sample_episode()
     y = agent.episode_targets(ep)
     # float32 rounding: numpy's std of K equal values can be ~1e-9 rather than 0
     assert abs(agent.stats["bonus_reward"]) < 1e-5 and abs(agent.stats["bonus_next"]) < 1e-5
     rows = np.arange(1, 8)
-    q_next = agent.q_target(agent._obs(0, rows)).detach().numpy()
+    q_next = agent.loss.q_target(agent._obs(0, rows)).detach().numpy()
     plain = backward_targets(ep.rewards, ep.actions, q_next, np.zeros((7, 10)), True, 0.99, 0.5)
     assert np.allclose(y, plain, atol=1e-5)
     assert np.allclose(y, y[:, :1])  # identical heads, identical targets
@@ -153,7 +153,7 @@ def test_bonus_is_added_when_heads_disagree(tmp_path: Path) -> None:
     ep = agent.replay.sample_episode()
     y = agent.episode_targets(ep)
     assert agent.stats["bonus_reward"] > 0
-    q_next = agent.q_target(agent._obs(0, np.arange(1, 6))).detach().numpy()
+    q_next = agent.loss.q_target(agent._obs(0, np.arange(1, 6))).detach().numpy()
     plain = backward_targets(ep.rewards, ep.actions, q_next, np.zeros((5, 10)), True, 0.99, 0.5)
     assert (y > plain).all()  # the immediate bonus is optimistic for every head
 
@@ -262,18 +262,18 @@ def test_update_moves_every_head_and_walks_the_episode_backward(
 
 def test_one_head_per_episode_and_environment(tmp_path: Path) -> None:
     agent = _agent(tmp_path, num_envs=3, eps_start=0.0, eps_end=0.0)
-    heads = agent.head_E.copy()
+    heads = agent.explore.head_E.copy()
     obs = np.zeros((3, 4), np.float32)
     q = agent.q(torch.as_tensor(obs)).detach()
     acts = agent.act(obs, global_step=10_000)
     assert list(acts) == [int(q[i, heads[i]].argmax()) for i in range(3)]
     none = np.zeros(3, bool)
     agent.observe(VectorStep(obs, acts, np.ones(3), none, none, None))
-    assert np.array_equal(agent.head_E, heads)  # no episode ended: same heads
+    assert np.array_equal(agent.explore.head_E, heads)  # no episode ended: same heads
     ended = np.array([True, True, True])
     for _ in range(5):
         agent.observe(VectorStep(obs, acts, np.ones(3), ended, none, list(obs)))
-    assert not np.array_equal(agent.head_E, heads)  # redrawn at episode ends
+    assert not np.array_equal(agent.explore.head_E, heads)  # redrawn at episode ends
     mean, var = agent.q_estimate(obs)
     assert mean.shape == var.shape == (3, 2) and (var >= 0).all()
     assert np.allclose(mean, q.mean(dim=1).numpy())

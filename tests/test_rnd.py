@@ -59,7 +59,7 @@ def test_predictor_error_falls_on_trained_states_and_stays_high_elsewhere(tmp_pa
     before_trained = agent.prediction_error(trained).mean().item()
     before_unseen = agent.prediction_error(unseen).mean().item()
     for _ in range(300):
-        agent.train_predictor(trained)
+        agent.predictor_learner({"obs_B": trained})
     after_trained = agent.prediction_error(trained).mean().item()
     after_unseen = agent.prediction_error(unseen).mean().item()
     assert after_trained < 0.1 * before_trained

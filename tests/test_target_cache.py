@@ -66,7 +66,7 @@ def test_an_agent_with_the_cache_trains_as_one_without(tmp_path: Path) -> None:
         mode: make_agent(tmp_path / mode, target_cache=mode, **kw)  # type: ignore[arg-type]
         for mode in ("auto", "off")
     }
-    assert agents["auto"].target_cache is not None and agents["off"].target_cache is None
+    assert agents["auto"].loss.target.cache is not None and agents["off"].loss.target.cache is None
     losses: dict[str, list[float]] = {"auto": [], "off": []}
     for mode, agent in agents.items():
         feed(agent, 100, seed=4)
@@ -76,7 +76,7 @@ def test_an_agent_with_the_cache_trains_as_one_without(tmp_path: Path) -> None:
             assert loss is not None
             losses[mode].append(float(loss))
             agent.learn(step)  # target copies (and posterior refreshes) where they fall
-    cache = agents["auto"].target_cache
+    cache = agents["auto"].loss.target.cache
     assert cache is not None and cache.hits > cache.misses > 0  # rows were reused
     np.testing.assert_allclose(losses["auto"], losses["off"], rtol=1e-4, atol=1e-6)
     for a, b in zip(
@@ -92,11 +92,11 @@ def test_a_state_saved_with_another_setting_or_before_the_cache_loads(tmp_path: 
         feed(agent, 200, seed=1)
         for _ in range(5):
             agent.update()
-    assert cached.target_cache is not None and cached.target_cache.misses > 0
+    assert cached.loss.target.cache is not None and cached.loss.target.cache.misses > 0
     plain.load_state_dict(cached.state_dict())  # the cache's state is left aside
-    assert plain.target_cache is None and plain.update() is not None
+    assert plain.loss.target.cache is None and plain.update() is not None
     cached.load_state_dict(plain.state_dict())  # none saved: the cache starts empty
-    assert cached.target_cache is not None and not (cached.target_cache.tags >= 0).any()
+    assert cached.loss.target.cache is not None and not (cached.loss.target.cache.tags >= 0).any()
     old = cached.state_dict()
     old.update(old.pop("exploration"))  # the layout before the exploration object
     del old["draws"], old["target_cache"]  # a checkpoint from before both

@@ -129,15 +129,15 @@ def test_target_network_does_not_move_with_online_updates(tmp_path: Path) -> Non
                 [rng.normal(size=4).astype(np.float32)] if t % 50 == 49 else None,
             )
         )
-    before = {k: v.clone() for k, v in agent.q_target.state_dict().items()}
+    before = {k: v.clone() for k, v in agent.loss.q_target.state_dict().items()}
     online_before = {k: v.clone() for k, v in agent.q.state_dict().items()}
     for _ in range(20):
         agent.update()
     assert any(not torch.equal(online_before[k], v) for k, v in agent.q.state_dict().items())
-    assert all(torch.equal(before[k], v) for k, v in agent.q_target.state_dict().items())
+    assert all(torch.equal(before[k], v) for k, v in agent.loss.q_target.state_dict().items())
     agent.learn(10_000)  # the N-th step copies
     assert all(
-        torch.equal(agent.q.state_dict()[k], v) for k, v in agent.q_target.state_dict().items()
+        torch.equal(agent.q.state_dict()[k], v) for k, v in agent.loss.q_target.state_dict().items()
     )
 
 
@@ -239,7 +239,7 @@ def test_overlap_env_needs_environments_that_step_asynchronously(tmp_path: Path)
 def test_epsilon_draws_for_one_environment_are_numpys_array_draws(num_actions: int) -> None:
     """The scalar draws of one environment give the numbers of rng.random(1) and
     rng.integers(0, A, size=1), and leave the generator where those leave it."""
-    from farsighter.agents.common import epsilon_draws
+    from farsighter.exploration.epsilon import epsilon_draws
 
     mine, numpys = np.random.default_rng(3), np.random.default_rng(3)
     for _ in range(500):

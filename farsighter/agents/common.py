@@ -37,14 +37,6 @@ def make_optimizer(params: Iterable[nn.Parameter], cfg: Config) -> torch.optim.O
     return torch.optim.Adam(params, lr=cfg.lr, eps=cfg.optim_eps, foreach=True)
 
 
-def linear_schedule(start: float, end: float, duration: int, step: int) -> float:
-    """Linear interpolation from ``start`` to ``end`` over ``duration`` steps, then constant."""
-    if duration <= 0:
-        return end
-    frac = min(max(step / duration, 0.0), 1.0)
-    return start + frac * (end - start)
-
-
 def make_replay(
     cfg: Config,
     obs_space: gym.spaces.Box,
@@ -335,7 +327,7 @@ def save_state(agent: Any, names: Sequence[str], include_replay: bool) -> dict[s
     """An agent's checkpoint: each named attribute in its saved form (modules, optimizers and
     anything with ``state_dict``; generators' states; dataclasses as dicts; tensors, arrays and
     plain values as they are), and the replay when asked."""
-    state = {name: _saved(getattr(agent, name)) for name in names}
+    state = {name: _saved(_held(agent, name)[0]) for name in names}
     state["replay"] = agent.replay.state_dict() if include_replay else None
     return state
 
@@ -344,7 +336,7 @@ def load_state(agent: Any, names: Sequence[str], state: dict[str, Any]) -> None:
     """Inverse of :func:`save_state`. A checkpoint saved without its replay makes the agent
     refill before it updates again (``Counters.hold_pending``)."""
     for name in names:
-        current, value = getattr(agent, name), state[name]
+        (current, owner, attr), value = _held(agent, name), state[name]
         if isinstance(current, np.random.Generator):
             current.bit_generator.state = value
         elif isinstance(current, torch.Generator):
@@ -364,15 +356,26 @@ def load_state(agent: Any, names: Sequence[str], state: dict[str, Any]) -> None:
             if isinstance(current, torch.Tensor) and current.shape == value.shape:
                 current.copy_(value)
             else:
-                setattr(agent, name, value.to(agent.device, copy=True))
+                setattr(owner, attr, value.to(agent.device, copy=True))
         elif isinstance(value, np.ndarray):
-            setattr(agent, name, value.copy())
+            setattr(owner, attr, value.copy())
         else:
-            setattr(agent, name, value)
+            setattr(owner, attr, value)
     if state.get("replay") is not None:
         agent.replay.load_state_dict(state["replay"])
     else:
         agent.counters.hold_pending = True
+
+
+def _held(agent: Any, key: str) -> tuple[Any, Any, str]:
+    """What checkpoint key ``key`` saves: the agent's attribute of that name, or the one its
+    ``SAVED_AT`` maps it to (a dotted path such as ``loss.q_target``: pieces that moved into a
+    loss or a learner keep the keys they were saved under). Returns it, its owner and its name."""
+    owner: Any = agent
+    path: list[str] = getattr(agent, "SAVED_AT", {}).get(key, key).split(".")
+    for attr in path[:-1]:
+        owner = getattr(owner, attr)
+    return getattr(owner, path[-1]), owner, path[-1]
 
 
 def _saved(value: Any) -> Any:
@@ -401,35 +404,6 @@ def greedy_actions(q_net: nn.Module, obs_E: np.ndarray, device: torch.device) ->
     version counters): the Q-values go straight to numpy, so nothing made here is kept."""
     with torch.inference_mode():
         return q_net(obs_tensor(obs_E, device)).argmax(dim=1).cpu().numpy()
-
-
-def epsilon_draws(
-    rng: np.random.Generator, num_actions: int, n: int
-) -> tuple[np.ndarray, np.ndarray]:
-    """``rng.random(n)``, then ``rng.integers(0, num_actions, size=n)``: the coins and random
-    actions of epsilon-greedy. For one environment they are drawn as scalars, the same numbers
-    and the same generator state after (``tests/test_training.py``) at a fifth of the cost
-    (numpy's array path costs about 15 microseconds a call)."""
-    if n == 1:
-        coin, action = rng.random(), rng.integers(0, num_actions)
-        return np.array([coin]), np.array([action], dtype=np.int64)
-    return rng.random(n), np.asarray(rng.integers(0, num_actions, size=n))
-
-
-def epsilon_greedy(
-    rng: np.random.Generator,
-    epsilon: float,
-    num_actions: int,
-    greedy: Any,
-    n: int,
-) -> np.ndarray:
-    """Epsilon-greedy actions for ``n`` environments; ``greedy()`` (the forward pass) is only
-    called when some environment acts greedily."""
-    coins_E, random_actions_E = epsilon_draws(rng, num_actions, n)
-    random_E = coins_E < epsilon
-    if random_E.all():
-        return random_actions_E
-    return np.where(random_E, random_actions_E, greedy())
 
 
 class RunningMeanStd:

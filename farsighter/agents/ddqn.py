@@ -15,12 +15,8 @@ from farsighter.agents.common import (
     TensorBatch,
     batch_tensors,
     build_seeded,
-    clip_and_step,
-    epsilon_greedy,
     greedy_actions,
-    linear_schedule,
     load_state,
-    make_optimizer,
     make_replay,
     obs_tensor,
     sample_minibatch,
@@ -29,18 +25,35 @@ from farsighter.agents.common import (
     td_loss,
     updates_owed,
 )
-from farsighter.agents.cuda_graph import (
-    Tensors,
-    graphs_enabled,
-    reset_step,
-    set_capturable,
-    wrap_step,
-)
+from farsighter.agents.cuda_graph import Tensors
+from farsighter.agents.learner import Learner
 from farsighter.agents.protocol import AgentFactory
 from farsighter.config import Config
+from farsighter.exploration import EpsilonGreedy
 from farsighter.networks import QNetwork, online_and_target
 from farsighter.ops.targets import double_q_target
 from farsighter.replay import VectorStep
+
+
+class DoubleQLoss:
+    """Eq. 3 on the double-Q target of Eq. 2 with k-step returns. The loss owns the target
+    network, a copy of ``q`` made here and moved only by the hard copy (:func:`sync_target`)."""
+
+    def __init__(self, q: QNetwork, kind: str) -> None:
+        self.q = q
+        self.q_target = copy.deepcopy(q).requires_grad_(False)
+        self.kind = kind
+
+    @torch.no_grad()
+    def targets(self, t: TensorBatch) -> torch.Tensor:
+        """y = R + gamma^n Q_target(s_{t+n}, argmax_a Q(s_{t+n}, a)), no bootstrap at a terminal."""
+        q_next_online, q_next_target = online_and_target(self.q, self.q_target, t.next_obs_B)
+        return double_q_target(t.returns_B, t.bootstrap_B, q_next_online, q_next_target)
+
+    def __call__(self, inputs: Tensors) -> Tensors:
+        t = TensorBatch.of(inputs)
+        q_B = self.q(t.obs_B).gather(1, t.actions_B.unsqueeze(1)).squeeze(1)
+        return {"loss": td_loss(q_B, self.targets(t), self.kind)}
 
 
 class DDQNAgent:
@@ -61,29 +74,19 @@ class DDQNAgent:
         self.q = build_seeded(
             cfg.seed, lambda: QNetwork(obs_space, self.num_actions, cfg.hidden_sizes)
         ).to(device)
-        self.q_target = copy.deepcopy(self.q)
-        self.q_target.requires_grad_(False)
-        self.opt = make_optimizer(self.q.parameters(), cfg)
-        # The update as a CUDA graph on a GPU (cfg.cuda_graph), or compiled (cfg.compile):
-        # farsighter.agents.cuda_graph.
-        self.graphs = graphs_enabled(cfg.cuda_graph, device, supported=not cfg.compile)
-        set_capturable(self.opt, self.graphs)
-        self.step = wrap_step(self._step, self.graphs, cfg.compile)
+        self.loss = DoubleQLoss(self.q, cfg.loss)
+        self.learner = Learner(self.loss, self.q.parameters(), cfg, device)
         self.replay = make_replay(cfg, obs_space, frame_stack, seed=cfg.seed + 1, device=device)
         self.rng = np.random.default_rng(cfg.seed + 2)
+        self.explore = EpsilonGreedy(cfg, self.num_actions, self.rng)
         self.counters = Counters(k=cfg.k)
-        self.epsilon = cfg.eps_start
 
     # ------------------------------------------------------------------ acting
     def act(self, obs_E: np.ndarray, global_step: int, explore: bool = True) -> np.ndarray:
         """Epsilon-greedy actions for a batch of environments (greedy when not exploring)."""
         if not explore:
             return self.greedy(obs_E)
-        cfg = self.cfg
-        self.epsilon = linear_schedule(cfg.eps_start, cfg.eps_end, cfg.eps_decay_steps, global_step)
-        return epsilon_greedy(
-            self.rng, self.epsilon, self.num_actions, lambda: self.greedy(obs_E), obs_E.shape[0]
-        )
+        return self.explore(global_step, lambda: self.greedy(obs_E), obs_E.shape[0])
 
     def greedy(self, obs_E: np.ndarray) -> np.ndarray:
         return greedy_actions(self.q, obs_E, self.device)
@@ -102,7 +105,7 @@ class DDQNAgent:
         for _ in range(updates_owed(self.counters, self.cfg, global_step)):
             metrics["td_loss"] = self.update()
         sync_target(
-            self.counters, global_step, self.cfg.target_update_every, (self.q, self.q_target)
+            self.counters, global_step, self.cfg.target_update_every, (self.q, self.loss.q_target)
         )
         return metrics
 
@@ -110,37 +113,20 @@ class DDQNAgent:
         """One gradient step on the double-Q loss of a k-step minibatch; returns the loss."""
         cfg = self.cfg
         batch = sample_minibatch(self.replay, cfg, cfg.batch_size, self.counters.k)
-        return self.step(batch_tensors(batch, self.device).tensors())["loss"]
-
-    def _step(self, inputs: Tensors) -> Tensors:
-        """The update on a minibatch already on the device (captured whole on a GPU)."""
-        t = TensorBatch.of(inputs)
-        q_B = self.q(t.obs_B).gather(1, t.actions_B.unsqueeze(1)).squeeze(1)
-        y_B = self.targets(t)
-        loss = td_loss(q_B, y_B, self.cfg.loss)
-        clip_and_step(loss, list(self.q.parameters()), self.opt, self.cfg.max_grad_norm)
-        return {"loss": loss.detach()}
-
-    @torch.no_grad()
-    def targets(self, t: TensorBatch) -> torch.Tensor:
-        """Double-Q target (Eq. 2 with k-step returns): the online network picks the argmax at
-        s_{t+n}, the target network evaluates it."""
-        q_next_online, q_next_target = online_and_target(self.q, self.q_target, t.next_obs_B)
-        return double_q_target(t.returns_B, t.bootstrap_B, q_next_online, q_next_target)
+        return self.learner(batch_tensors(batch, self.device).tensors())["loss"]
 
     def diagnostics(self) -> dict[str, float]:
-        return {"epsilon": self.epsilon, "k": float(self.counters.k)}
+        return {"epsilon": self.explore.epsilon, "k": float(self.counters.k)}
 
     # ------------------------------------------------------------------ checkpoints
     SAVED = ("q", "q_target", "opt", "rng", "counters")
+    SAVED_AT = {"q_target": "loss.q_target", "opt": "learner"}  # keys of the earlier layout
 
     def state_dict(self, include_replay: bool = True) -> dict[str, Any]:
         return save_state(self, self.SAVED, include_replay)
 
     def load_state_dict(self, state: dict[str, Any]) -> None:
         load_state(self, self.SAVED, state)
-        set_capturable(self.opt, self.graphs)
-        reset_step(self.step)
 
 
 AGENT: AgentFactory = DDQNAgent  # the class farsighter.algorithms names; mypy checks the protocol

@@ -25,8 +25,6 @@ from farsighter.agents.common import (
     batch_tensors,
     build_seeded,
     elementwise_td_loss,
-    epsilon_draws,
-    linear_schedule,
     make_optimizer,
     row_bytes,
     sync_target,
@@ -34,6 +32,7 @@ from farsighter.agents.common import (
     uses_gpu_replay,
 )
 from farsighter.config import Config
+from farsighter.exploration.epsilon import epsilon_draws, linear_schedule
 from farsighter.networks import QNetwork
 from farsighter.ops.targets import double_q_target
 from farsighter.replay import VectorStep

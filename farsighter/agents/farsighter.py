@@ -27,7 +27,6 @@ Q(s, a) = phi_theta(s)^T w_a with a Bayesian linear regression posterior over ea
 
 from __future__ import annotations
 
-import copy
 from dataclasses import dataclass
 from typing import Any
 
@@ -39,38 +38,27 @@ from torch import nn
 from farsighter.agents.common import (
     Counters,
     RecentRows,
-    TensorBatch,
     adapt_k,
     batch_tensors,
     build_seeded,
-    clip_and_step,
     crossed,
     load_state,
-    make_optimizer,
     make_replay,
     obs_tensor,
     sample_minibatch,
     save_state,
-    sync_target,
-    td_loss,
     to_device,
     updates_owed,
 )
-from farsighter.agents.cuda_graph import (
-    Tensors,
-    graphs_enabled,
-    reset_step,
-    set_capturable,
-    wrap_step,
-)
+from farsighter.agents.cuda_graph import Tensors
+from farsighter.agents.farsighter_loss import FarsighterLoss
+from farsighter.agents.learner import Learner, make_target_cache
 from farsighter.agents.protocol import AgentFactory
 from farsighter.config import Config
 from farsighter.exploration import ThompsonExploration
-from farsighter.networks import make_torso, online_and_target
+from farsighter.networks import make_torso
 from farsighter.ops.blr import BLRHead, greedy_predictive_variance
-from farsighter.ops.targets import double_q_target
 from farsighter.replay import Batch, VectorStep
-from farsighter.replay.target_cache import TargetCache, target_cache_rows
 
 FEATURE_CHUNK = 4_096  # rows per forward pass when computing features for a posterior refresh
 RECENT_FEATURES = 2_048  # incremental mode: minibatch features kept for adaptive k's Q-variance
@@ -108,7 +96,6 @@ class FarsighterAgent:
 
         torso, init_AD = build_seeded(cfg.seed, build)
         self.torso = torso.to(device)
-        self.torso_target = copy.deepcopy(self.torso).requires_grad_(False)
         b = cfg.blr
         self.head = BLRHead(
             num_actions=self.num_actions,
@@ -121,26 +108,11 @@ class FarsighterAgent:
             device=device,
         )
         self.head.set_mean(init_AD.to(device))
-        self.target_mean_AD = self.head.mean_AD.clone()
-        self.opt = make_optimizer(self.torso.parameters(), cfg)
-        # The update as a CUDA graph on a GPU (cfg.cuda_graph), or compiled (cfg.compile):
-        # farsighter.agents.cuda_graph.
-        # What it reads between updates changes in place: torso parameters, the target torso
-        # (load_state_dict copies), head.mean_AD and target_mean_AD (copied into).
-        self.graphs = graphs_enabled(cfg.cuda_graph, device, supported=not cfg.compile)
-        set_capturable(self.opt, self.graphs)
-        self.step = wrap_step(self._step, self.graphs, cfg.compile)
+        # Eq. 8, with the target features of sampled next states kept until the next copy
+        cache = make_target_cache(cfg, device, self.torso.out_dim)
+        self.loss = FarsighterLoss(self.torso, self.head, cfg, cache)
+        self.learner = Learner(self.loss, self.torso.parameters(), cfg, device)
         self.replay = make_replay(cfg, obs_space, frame_stack, seed=cfg.seed + 1, device=device)
-        # target features of sampled next states, kept until the next target copy (eager only:
-        # a captured or compiled step runs the target network inside it)
-        cached = (
-            cfg.target_cache == "auto" and cfg.sample_recent and not (self.graphs or cfg.compile)
-        )
-        self.target_cache = (
-            TargetCache(cfg.num_envs, target_cache_rows(cfg), self.torso.out_dim, device)
-            if cached
-            else None
-        )
         self.rng = np.random.default_rng(cfg.seed + 2)
         self.gen = torch.Generator(device=device)
         self.gen.manual_seed(cfg.seed + 3)
@@ -190,10 +162,8 @@ class FarsighterAgent:
             c, "refreshes", global_step, cfg.blr.posterior_every
         ):
             self.refresh_posterior()
-        if sync_target(c, global_step, cfg.target_update_every, (self.torso, self.torso_target)):
-            self.target_mean_AD.copy_(self.head.mean_AD)  # Algorithm 1 line 8
-            if self.target_cache is not None:
-                self.target_cache.clear()
+        if crossed(c, "target_syncs", global_step, cfg.target_update_every):
+            self.loss.copy_target()  # Algorithm 1 line 8
         return metrics
 
     def _sample(self) -> Batch | None:
@@ -203,54 +173,12 @@ class FarsighterAgent:
         except ValueError:  # not enough complete k-step windows yet
             return None
 
-    @torch.no_grad()
-    def _targets(
-        self,
-        t: TensorBatch,
-        w_online_AD: torch.Tensor | None = None,
-        z_BAD: torch.Tensor | None = None,
-        phi_next_target: torch.Tensor | None = None,
-    ) -> torch.Tensor:
-        """y = r^k + gamma^k phi_target(s')^T mean_target[a*] (Eq. 8 with k-step returns).
-
-        a* is the argmax under the online features and the posterior mean (Eq. 8), or under the
-        latest acting Thompson draw when ``blr.target = thompson`` (the BDQN authors' code).
-        ``w_online_AD`` (that draw) and ``z_BAD`` (the normals of ``blr.target = sample``) are
-        drawn here unless given (:meth:`_draws`, for the captured update); ``phi_next_target``
-        (the target features of s', from the target cache) likewise."""
-        if phi_next_target is None:
-            phi_next, phi_next_target = online_and_target(
-                self.torso, self.torso_target, t.next_obs_B
-            )
-        else:
-            phi_next = self.torso(t.next_obs_B)
-        if w_online_AD is None:
-            thompson = self.cfg.blr.target == "thompson"
-            w_online_AD = self.exploration.acting_draw(self.gen) if thompson else self.head.mean_AD
-        q_next_online = phi_next @ w_online_AD.T
-        q_next_target = phi_next_target @ self.target_mean_AD.T
-        if self.cfg.blr.target == "sample":
-            noise_BA = self.head.q_noise(phi_next_target, generator=self.gen, z_BAD=z_BAD)
-            q_next_online = q_next_online + noise_BA
-            q_next_target = q_next_target + noise_BA
-        return double_q_target(t.returns_B, t.bootstrap_B, q_next_online, q_next_target)
-
-    @torch.no_grad()
-    def _posterior_targets(self, t: TensorBatch) -> torch.Tensor:
-        """Regression targets of a posterior refresh: Eq. 8's (``blr.posterior_target = double``)
-        or y = r^k + gamma^k max_a phi_target(s')^T mean_target_a (``max``, the BDQN code)."""
-        if self.cfg.blr.posterior_target == "double":
-            return self._targets(t)
-        q_next_target = self.torso_target(t.next_obs_B) @ self.target_mean_AD.T
-        return t.returns_B + t.bootstrap_B * q_next_target.max(dim=1).values
-
     def update(self) -> torch.Tensor | None:
         """One step on theta with w at the posterior mean (Eq. 8); the BLR weights stay fixed."""
         batch = self._sample()
         if batch is None:
             return None
-        t = batch_tensors(batch, self.device)
-        inputs = t.tensors()
+        inputs = batch_tensors(batch, self.device).tensors()
         if self.cfg.k_target == "max" and self.counters.k > 1:
             # The larger of the k-step and the one-step target of the same start (lower-bound
             # Q-learning, Tang 2020): see Config.k_target. Same s and a, so only s', r, gamma.
@@ -260,74 +188,28 @@ class FarsighterAgent:
                 one_returns_B=to_device(one.returns, self.device),
                 one_bootstrap_B=to_device(one.bootstrap, self.device),
             )
-            if self.target_cache is not None:
-                inputs["one_phi_next_target_BD"] = self._target_features(
-                    batch.env_index, batch.index + one.steps, inputs["one_next_obs_B"]
+            inputs.update(
+                self.loss.target_features(
+                    batch.env_index, batch.index + one.steps, inputs["one_next_obs_B"], "one_"
                 )
-        if self.target_cache is not None:
-            inputs["phi_next_target_BD"] = self._target_features(
+            )
+        inputs.update(
+            self.loss.target_features(
                 batch.env_index, batch.index + batch.steps, inputs["next_obs_B"]
             )
-        out = self.step({**inputs, **self._draws(len(batch.actions), "one_next_obs_B" in inputs)})
+        )
+        out = self.learner(
+            {**inputs, **self._draws(len(batch.actions), "one_next_obs_B" in inputs)}
+        )
         if self.cfg.blr.mode == "incremental":
-            self._accumulate(out["phi_BD"], t.actions_B, out["y_post_B"])
+            self._accumulate(out["phi_BD"], inputs["actions_B"], out["y_post_B"])
         return out["loss"]
 
-    @torch.no_grad()
-    def _target_features(
-        self, e_B: np.ndarray, next_B: np.ndarray, next_obs_B: torch.Tensor
-    ) -> torch.Tensor:
-        """phi_target(s') of a minibatch's next states (logical rows ``next_B``), through the
-        target cache: the target network runs over the rows not stored since the last copy."""
-        assert self.target_cache is not None
-        return self.target_cache.lookup(
-            e_B, next_B, lambda i: self.torso_target(next_obs_B[torch.from_numpy(i)])
+    def _draws(self, rows: int, one_step: bool = False) -> Tensors:
+        """The draws of the targets of ``rows`` rows (:meth:`FarsighterLoss.draws`)."""
+        return self.loss.draws(
+            rows, one_step, self.gen, lambda: self.exploration.acting_draw(self.gen)
         )
-
-    def _draws(self, rows: int, one_step: bool) -> Tensors:
-        """What a target draws, drawn before the update so a captured step takes it as input: the
-        acting draw (``blr.target = thompson``), or the normals of the k-step target and then of
-        the one-step target (``sample``), in the order the eager targets draw them."""
-        target = self.cfg.blr.target
-        if target == "thompson":
-            return {"w_online_AD": self.exploration.acting_draw(self.gen)}
-        if target != "sample":
-            return {}
-        draws = {"z_BAD": self.head.noise_z(rows, self.gen)}
-        if one_step:
-            draws["one_z_BAD"] = self.head.noise_z(rows, self.gen)
-        return draws
-
-    def _step(self, inputs: Tensors) -> Tensors:
-        """The update on a minibatch already on the device (captured whole on a GPU): the
-        target, the loss at the posterior mean, and the optimizer step on theta."""
-        t = TensorBatch.of(inputs)
-        w = inputs.get("w_online_AD")
-        y_B = self._targets(t, w, inputs.get("z_BAD"), inputs.get("phi_next_target_BD"))
-        if "one_next_obs_B" in inputs:  # k_target = max
-            one = TensorBatch(
-                obs_B=t.obs_B,
-                next_obs_B=inputs["one_next_obs_B"],
-                actions_B=t.actions_B,
-                returns_B=inputs["one_returns_B"],
-                bootstrap_B=inputs["one_bootstrap_B"],
-            )
-            y_B = torch.maximum(
-                y_B,
-                self._targets(
-                    one, w, inputs.get("one_z_BAD"), inputs.get("one_phi_next_target_BD")
-                ),
-            )
-        phi_BD = self.torso(t.obs_B)
-        q_B = (phi_BD @ self.head.mean_AD.T).gather(1, t.actions_B[:, None])[:, 0]
-        loss = td_loss(q_B, y_B, self.cfg.loss)
-        clip_and_step(loss, list(self.torso.parameters()), self.opt, self.cfg.max_grad_norm)
-        out = {"loss": loss.detach()}
-        if self.cfg.blr.mode == "incremental":  # the statistics are added outside the step
-            double = self.cfg.blr.posterior_target == "double"
-            out["phi_BD"] = phi_BD.detach()
-            out["y_post_B"] = y_B if double else self._posterior_targets(t)
-        return out
 
     def _accumulate(self, phi_BD: torch.Tensor, a_B: torch.Tensor, y_B: torch.Tensor) -> None:
         """Add a minibatch to the running statistics with weight w = train_every / batch_size
@@ -357,7 +239,10 @@ class FarsighterAgent:
             t = batch_tensors(part, self.device)
             phis.append(self.torso(t.obs_B))
             actions.append(t.actions_B)
-            ys.append(self._posterior_targets(t))
+            double = self.cfg.blr.posterior_target == "double"  # Eq. 8's target draws
+            ys.append(
+                self.loss.posterior_targets(t, self._draws(len(part.actions)) if double else {})
+            )
         if not phis:
             empty = torch.zeros(0, device=self.device)
             return empty, empty.long(), empty
@@ -403,29 +288,30 @@ class FarsighterAgent:
         "opt",
         "rng",
         "gen",
-        "exploration",
-        "target_cache",
-        "recent_phi",
         "counters",
     )
+    SAVED_AT = {  # keys of the earlier layout
+        "torso_target": "loss.torso_target",
+        "target_mean_AD": "loss.target_mean_AD",
+        "opt": "learner",
+    }
 
     def state_dict(self, include_replay: bool = True) -> dict[str, Any]:
         state = save_state(self, self.SAVED, include_replay)
-        if not include_replay:
-            state["target_cache"] = None  # keyed by replay rows: of no use without them
+        state["exploration"] = self.exploration.state_dict()
+        state["recent_phi"] = self.recent_phi.state_dict()
+        cache = self.loss.target.cache  # keyed by replay rows: of no use without them
+        state["target_cache"] = None if cache is None or not include_replay else cache.state_dict()
         return state
 
     def load_state_dict(self, state: dict[str, Any]) -> None:
-        # The draws and the target cache are kept when they can be: a checkpoint from before
-        # them, or saved with another target_cache or compile setting, starts them afresh.
-        own = ("exploration", "target_cache")
-        load_state(self, [n for n in self.SAVED if n not in own], state)
+        load_state(self, self.SAVED, state)
+        self.recent_phi.load_state_dict(state["recent_phi"])
         # a checkpoint from before the exploration object holds its pieces under our own keys
         self.exploration.load_state_dict(state.get("exploration", state))
-        if self.target_cache is not None:  # saved without the replay: None (see state_dict)
-            self.target_cache.load_state_dict(state.get("target_cache"))
-        set_capturable(self.opt, self.graphs)
-        reset_step(self.step)  # the optimizer's state tensors are new ones
+        # the target cache (cleared by the target's load) is kept when the checkpoint has it
+        if self.loss.target.cache is not None:
+            self.loss.target.cache.load_state_dict(state.get("target_cache"))
 
 
 AGENT: AgentFactory = (

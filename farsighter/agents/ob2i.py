@@ -50,11 +50,7 @@ from farsighter.agents.common import (
     Counters,
     RunningMeanStd,
     build_seeded,
-    clip_and_step,
-    epsilon_greedy,
-    linear_schedule,
     load_state,
-    make_optimizer,
     make_replay,
     obs_tensor,
     save_state,
@@ -62,8 +58,11 @@ from farsighter.agents.common import (
     td_loss,
     updates_owed,
 )
+from farsighter.agents.cuda_graph import Tensors
+from farsighter.agents.learner import Learner
 from farsighter.agents.protocol import AgentFactory
 from farsighter.config import Config
+from farsighter.exploration.epsilon import EpisodeHeads
 from farsighter.networks import make_torso, make_trunk
 from farsighter.replay import Episode, VectorStep
 
@@ -183,6 +182,21 @@ def backward_targets(
     return y_TK.astype(np.float32)
 
 
+class EnsembleLoss:
+    """Every head's TD loss on the backward-induction targets ``y_BK`` of a minibatch of one
+    episode. The loss owns the target network (a copy of ``q``), which the targets read."""
+
+    def __init__(self, q: nn.Module, kind: str) -> None:
+        self.q = q
+        self.q_target = copy.deepcopy(q).requires_grad_(False)
+        self.kind = kind
+
+    def __call__(self, inputs: Tensors) -> Tensors:
+        q_BKA, a_B = self.q(inputs["obs_B"]), inputs["actions_B"]
+        q_BK = q_BKA.gather(2, a_B[:, None, None].expand(-1, q_BKA.shape[1], 1))[:, :, 0]
+        return {"loss": ensemble_td_loss(q_BK, inputs["y_BK"], self.kind)}
+
+
 @dataclass
 class OB2ICounters(Counters):
     episodes_learned: int = 0  # episodes whose backward targets were computed
@@ -214,15 +228,14 @@ class OB2IAgent:
                 separate_heads=cfg.ob2i.separate_heads,
             ),
         ).to(device)
-        self.q_target = copy.deepcopy(self.q).requires_grad_(False)
-        self.opt = make_optimizer(self.q.parameters(), cfg)
+        self.loss = EnsembleLoss(self.q, cfg.loss)
+        self.learner = Learner(self.loss, self.q.parameters(), cfg, device)
         self.replay = make_replay(cfg, obs_space, frame_stack, seed=cfg.seed + 1)
         self.rng = np.random.default_rng(cfg.seed + 2)
-        self.head_E = self.rng.integers(0, self.num_heads, size=cfg.num_envs)
+        self.explore = EpisodeHeads(cfg, self.num_actions, self.num_heads, self.rng)
         self.next_bonus_rms = RunningMeanStd()
         self.reward_bonus_rms = RunningMeanStd()
         self.counters = OB2ICounters(k=cfg.k)
-        self.epsilon = cfg.eps_start
         # The episode being learned from: targets y (T, K), consumed backward from ``cursor``.
         self.episode: Episode | None = None
         self.y_TK = np.zeros((0, self.num_heads), dtype=np.float32)
@@ -236,11 +249,7 @@ class OB2IAgent:
         n = obs_E.shape[0]
         if not explore:
             return self.greedy(obs_E)
-        cfg = self.cfg
-        self.epsilon = linear_schedule(cfg.eps_start, cfg.eps_end, cfg.eps_decay_steps, global_step)
-        heads_E = (
-            self.head_E if n == len(self.head_E) else self.rng.integers(0, self.num_heads, size=n)
-        )
+        heads_E = self.explore.heads(n)
 
         @torch.no_grad()
         def head_greedy() -> np.ndarray:
@@ -248,7 +257,7 @@ class OB2IAgent:
             q_EA = q_EKA.cpu()[torch.arange(n), torch.as_tensor(heads_E)]
             return q_EA.argmax(dim=1).cpu().numpy()
 
-        return epsilon_greedy(self.rng, self.epsilon, self.num_actions, head_greedy, n)
+        return self.explore(global_step, head_greedy, n)
 
     @torch.no_grad()
     def greedy(self, obs_E: np.ndarray) -> np.ndarray:
@@ -271,9 +280,7 @@ class OB2IAgent:
 
     def observe(self, step: VectorStep) -> None:
         self.replay.add_step(step)
-        ended_E = np.logical_or(step.terminated_E, step.truncated_E)
-        if ended_E.any():  # a new head for each new episode
-            self.head_E[ended_E] = self.rng.integers(0, self.num_heads, size=int(ended_E.sum()))
+        self.explore.ended(np.logical_or(step.terminated_E, step.truncated_E))
 
     # ------------------------------------------------------------------ learning
     def learn(self, global_step: int) -> dict[str, torch.Tensor]:
@@ -284,7 +291,7 @@ class OB2IAgent:
             if loss is not None:
                 metrics["td_loss"] = loss
         sync_target(
-            self.counters, global_step, self.cfg.target_update_every, (self.q, self.q_target)
+            self.counters, global_step, self.cfg.target_update_every, (self.q, self.loss.q_target)
         )
         return metrics
 
@@ -305,7 +312,7 @@ class OB2IAgent:
             a_B = torch.as_tensor(ep.actions[lo:hi], device=self.device, dtype=torch.int64)
             bonus_BA = ucb_bonus(self.q(self._obs(ep.env, rows)))  # online heads at (s_t, a_t)
             rb_T[lo:hi] = bonus_BA.gather(1, a_B[:, None])[:, 0].cpu().numpy()
-            q_next_TKA[lo:hi] = self.q_target(self._obs(ep.env, rows + 1)).cpu().numpy()
+            q_next_TKA[lo:hi] = self.loss.q_target(self._obs(ep.env, rows + 1)).cpu().numpy()
         self.stats["q_variance"] = float(np.mean(rb_T.astype(np.float64) ** 2))
         if o.normalize_reward_bonus:
             self.reward_bonus_rms.update(rb_T)
@@ -336,18 +343,17 @@ class OB2IAgent:
         hi = self.cursor
         lo = max(0, hi - self.cfg.batch_size)
         rows = ep.start + np.arange(lo, hi, dtype=np.int64)
-        a_B = torch.as_tensor(ep.actions[lo:hi], device=self.device, dtype=torch.int64)
-        y_BK = torch.as_tensor(self.y_TK[lo:hi], device=self.device)
-        q_BKA = self.q(self._obs(ep.env, rows))
-        q_BK = q_BKA.gather(2, a_B[:, None, None].expand(-1, self.num_heads, 1))[:, :, 0]
-        loss = ensemble_td_loss(q_BK, y_BK, self.cfg.loss)
-        clip_and_step(loss, list(self.q.parameters()), self.opt, self.cfg.max_grad_norm)
+        inputs = {
+            "obs_B": self._obs(ep.env, rows),
+            "actions_B": torch.as_tensor(ep.actions[lo:hi], device=self.device, dtype=torch.int64),
+            "y_BK": torch.as_tensor(self.y_TK[lo:hi], device=self.device),
+        }
         self.cursor = lo
-        return loss.detach()
+        return self.learner(inputs)["loss"]
 
     def diagnostics(self) -> dict[str, float]:
         return {
-            "epsilon": self.epsilon,
+            "epsilon": self.explore.epsilon,
             "bonus": self.stats["bonus_reward"] + self.stats["bonus_next"],
             "bonus_reward": self.stats["bonus_reward"],
             "bonus_next": self.stats["bonus_next"],
@@ -368,6 +374,13 @@ class OB2IAgent:
         "stats",
         "counters",
     )
+
+    SAVED_AT = {  # keys of the earlier layout
+        "q_target": "loss.q_target",
+        "opt": "learner",
+        "head_E": "explore.head_E",
+        "epsilon": "explore.epsilon",
+    }
 
     def state_dict(self, include_replay: bool = True) -> dict[str, Any]:
         state = save_state(self, self.SAVED, include_replay)

@@ -20,7 +20,6 @@
 
 from __future__ import annotations
 
-import copy
 from typing import Any
 
 import gymnasium as gym
@@ -33,24 +32,21 @@ from farsighter.agents.common import (
     RunningMeanStd,
     batch_tensors,
     build_seeded,
-    clip_and_step,
-    epsilon_greedy,
     greedy_actions,
-    linear_schedule,
     load_state,
-    make_optimizer,
     make_replay,
     obs_tensor,
     sample_minibatch,
     save_state,
     sync_target,
-    td_loss,
     updates_owed,
 )
+from farsighter.agents.ddqn import DoubleQLoss
+from farsighter.agents.learner import Learner
 from farsighter.agents.protocol import AgentFactory
 from farsighter.config import Config
-from farsighter.networks import QNetwork, make_torso, online_and_target
-from farsighter.ops.targets import double_q_target
+from farsighter.exploration import EpsilonGreedy
+from farsighter.networks import QNetwork, make_torso
 from farsighter.replay import Batch, VectorStep
 
 STD_EPS = 1e-8
@@ -96,8 +92,9 @@ class RNDAgent:
         self.q = build_seeded(
             cfg.seed, lambda: QNetwork(obs_space, self.num_actions, cfg.hidden_sizes)
         ).to(device)
-        self.q_target = copy.deepcopy(self.q).requires_grad_(False)
-        self.opt = make_optimizer(self.q.parameters(), cfg)
+        # DDQN's loss on the returns with the bonus added (module docstring)
+        self.loss = DoubleQLoss(self.q, cfg.loss)
+        self.learner = Learner(self.loss, self.q.parameters(), cfg, device)
         r = cfg.rnd
         self.rnd_target = build_seeded(
             cfg.seed + 4, lambda: RNDNetwork(obs_space, cfg.hidden_sizes, r.feature_dim, 0)
@@ -107,7 +104,17 @@ class RNDAgent:
         self.predictor = build_seeded(
             cfg.seed + 5, lambda: RNDNetwork(obs_space, cfg.hidden_sizes, r.feature_dim, 2)
         ).to(device)
-        self.rnd_opt = torch.optim.Adam(self.predictor.parameters(), lr=r.lr, foreach=True)
+        rnd_opt = torch.optim.Adam(self.predictor.parameters(), lr=r.lr, foreach=True)
+        # the predictor's step, eager (no clipping): the bonus it gives is read on the host
+        self.predictor_learner = Learner(
+            self.predictor_loss,
+            self.predictor.parameters(),
+            cfg,
+            device,
+            optimizer=rnd_opt,
+            max_grad_norm=0.0,
+            eager=True,
+        )
         shape = obs_space.shape
         assert shape is not None
         self.whiten = r.normalize_obs and len(shape) == 1
@@ -115,8 +122,8 @@ class RNDAgent:
         self.intrinsic_rms = RunningMeanStd()
         self.replay = make_replay(cfg, obs_space, frame_stack, seed=cfg.seed + 1, device=device)
         self.rng = np.random.default_rng(cfg.seed + 2)
+        self.explore = EpsilonGreedy(cfg, self.num_actions, self.rng)
         self.counters = Counters(k=cfg.k)
-        self.epsilon = cfg.eps_start
         self.stats = {"intrinsic_reward": float("nan"), "predictor_loss": float("nan")}
 
     # ------------------------------------------------------------------ acting
@@ -124,11 +131,7 @@ class RNDAgent:
         """Epsilon-greedy actions for a batch of environments (greedy when not exploring)."""
         if not explore:
             return self.greedy(obs_E)
-        cfg = self.cfg
-        self.epsilon = linear_schedule(cfg.eps_start, cfg.eps_end, cfg.eps_decay_steps, global_step)
-        return epsilon_greedy(
-            self.rng, self.epsilon, self.num_actions, lambda: self.greedy(obs_E), obs_E.shape[0]
-        )
+        return self.explore(global_step, lambda: self.greedy(obs_E), obs_E.shape[0])
 
     def greedy(self, obs_E: np.ndarray) -> np.ndarray:
         return greedy_actions(self.q, obs_E, self.device)
@@ -165,14 +168,10 @@ class RNDAgent:
         self.intrinsic_rms.update(e_N)
         return e_N / (float(self.intrinsic_rms.std) + STD_EPS)
 
-    def train_predictor(self, obs: torch.Tensor) -> torch.Tensor:
-        """One Adam step of f_hat towards f on these observations; returns the loss."""
-        x = self._rnd_input(obs)
-        loss = (self.predictor(x) - self.rnd_target(x)).pow(2).mean()
-        self.rnd_opt.zero_grad(set_to_none=True)
-        loss.backward()
-        self.rnd_opt.step()
-        return loss.detach()
+    def predictor_loss(self, inputs: dict[str, torch.Tensor]) -> dict[str, torch.Tensor]:
+        """The distillation loss mean_j (f_hat(x)_j - f(x)_j)^2 on observations ``obs_B``."""
+        x = self._rnd_input(inputs["obs_B"])
+        return {"loss": (self.predictor(x) - self.rnd_target(x)).pow(2).mean()}
 
     def intrinsic_returns(self, batch: Batch) -> np.ndarray:
         """sum_{j<n} gamma^j i(s_{t+j+1}) for every window of the minibatch (float32, (B,))."""
@@ -195,7 +194,7 @@ class RNDAgent:
         for _ in range(updates_owed(self.counters, self.cfg, global_step)):
             metrics["td_loss"] = self.update()
         sync_target(
-            self.counters, global_step, self.cfg.target_update_every, (self.q, self.q_target)
+            self.counters, global_step, self.cfg.target_update_every, (self.q, self.loss.q_target)
         )
         return metrics
 
@@ -204,21 +203,17 @@ class RNDAgent:
         step on the same minibatch; returns the TD loss."""
         cfg = self.cfg
         batch = sample_minibatch(self.replay, cfg, cfg.batch_size, self.counters.k)
-        t = batch_tensors(batch, self.device)
+        inputs = batch_tensors(batch, self.device).tensors()
         ri_B = torch.as_tensor(self.intrinsic_returns(batch), device=self.device)
-        returns_B = t.returns_B + cfg.rnd.intrinsic_weight * ri_B
-        q_B = self.q(t.obs_B).gather(1, t.actions_B.unsqueeze(1)).squeeze(1)
-        with torch.no_grad():
-            q_next_online, q_next_target = online_and_target(self.q, self.q_target, t.next_obs_B)
-            y_B = double_q_target(returns_B, t.bootstrap_B, q_next_online, q_next_target)
-        loss = td_loss(q_B, y_B, cfg.loss)
-        clip_and_step(loss, list(self.q.parameters()), self.opt, cfg.max_grad_norm)
-        self.stats["predictor_loss"] = float(self.train_predictor(t.obs_B))
-        return loss.detach()
+        inputs["returns_B"] = inputs["returns_B"] + cfg.rnd.intrinsic_weight * ri_B
+        loss = self.learner(inputs)["loss"]
+        predictor = self.predictor_learner({"obs_B": inputs["obs_B"]})["loss"]
+        self.stats["predictor_loss"] = float(predictor)
+        return loss
 
     def diagnostics(self) -> dict[str, float]:
         return {
-            "epsilon": self.epsilon,
+            "epsilon": self.explore.epsilon,
             "k": float(self.counters.k),
             "intrinsic_reward": self.stats["intrinsic_reward"],
             "intrinsic_std": float(self.intrinsic_rms.std),
@@ -240,6 +235,13 @@ class RNDAgent:
         "stats",
         "counters",
     )
+
+    SAVED_AT = {  # keys of the earlier layout
+        "q_target": "loss.q_target",
+        "opt": "learner",
+        "rnd_opt": "predictor_learner",
+        "epsilon": "explore.epsilon",
+    }
 
     def state_dict(self, include_replay: bool = True) -> dict[str, Any]:
         return save_state(self, self.SAVED, include_replay)

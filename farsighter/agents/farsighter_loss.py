@@ -1,0 +1,146 @@
+"""Farsighter's and BDQN's loss on theta (Eq. 8) and the regression targets of the posterior.
+
+Q(s, a) = phi_theta(s)^T w_a. The representation theta learns with w fixed at the posterior mean,
+on the double-Q target of k-step returns (section 4.4):
+
+    y = r^k + gamma^k phi_target(s')^T mean_target[a*],   a* = argmax_a phi_theta(s')^T w_a
+
+with w the posterior mean (Eq. 8), or the latest acting Thompson draw (``blr.target = thompson``,
+the BDQN authors' code). With ``blr.target = sample`` a posterior draw per row and action,
+sqrt(cov_scale) phi_target(s')^T U_a z, is added to both Q's of s' (optimism that propagates);
+with ``k_target = max`` the target is the larger of the k-step and the one-step target of the
+same start (both our extensions: ``Config.k_target``, ``BLRConfig.target``).
+
+The loss owns the target torso and the target mean, which move only at the hard copy (Algorithm
+1 line 8: :meth:`FarsighterLoss.copy_target`). It draws nothing: the acting draw and the normals
+come in its inputs (the agent draws them before the update, so a captured step can take them),
+and the target features of s' may come from the target cache.
+"""
+
+from __future__ import annotations
+
+import copy
+from collections.abc import Callable
+
+import numpy as np
+import torch
+
+from farsighter.agents.common import TensorBatch, td_loss
+from farsighter.agents.cuda_graph import Tensors
+from farsighter.agents.learner import CachedTarget
+from farsighter.config import Config
+from farsighter.networks import Torso, online_and_target
+from farsighter.ops.blr import BLRHead
+from farsighter.ops.targets import double_q_target
+from farsighter.replay.target_cache import TargetCache
+
+
+class FarsighterLoss:
+    """Eq. 8's squared (or Huber) error of Q at the posterior mean (module docstring)."""
+
+    def __init__(
+        self, torso: Torso, head: BLRHead, cfg: Config, cache: TargetCache | None = None
+    ) -> None:
+        self.torso, self.head = torso, head
+        self.torso_target = copy.deepcopy(torso).requires_grad_(False)
+        # target features of s' kept per replay row until the next copy (eager runs only)
+        self.target = CachedTarget(self.torso_target, cache)
+        self.target_mean_AD = head.mean_AD.clone()
+        self.kind, self.blr = cfg.loss, cfg.blr
+
+    def copy_target(self) -> None:
+        """Algorithm 1 line 8: target torso and target mean <- online ones (in place)."""
+        self.torso_target.load_state_dict(self.torso.state_dict())  # clears the target cache
+        self.target_mean_AD.copy_(self.head.mean_AD)
+
+    @torch.no_grad()
+    def targets(
+        self, t: TensorBatch, draws: Tensors, phi_next_target: torch.Tensor | None = None
+    ) -> torch.Tensor:
+        """y of Eq. 8 with k-step returns; ``draws``: ``w_online_AD`` (thompson) or ``z_BAD``
+        (sample); ``phi_next_target``: phi_target(s') when the cache gave it."""
+        if phi_next_target is None:
+            phi_next, phi_next_target = online_and_target(
+                self.torso, self.torso_target, t.next_obs_B
+            )
+        else:
+            phi_next = self.torso(t.next_obs_B)
+        q_next_online = phi_next @ draws.get("w_online_AD", self.head.mean_AD).T
+        q_next_target = phi_next_target @ self.target_mean_AD.T
+        if self.blr.target == "sample":
+            noise_BA = self.head.q_noise(phi_next_target, z_BAD=draws["z_BAD"])
+            q_next_online = q_next_online + noise_BA
+            q_next_target = q_next_target + noise_BA
+        return double_q_target(t.returns_B, t.bootstrap_B, q_next_online, q_next_target)
+
+    @torch.no_grad()
+    def posterior_targets(self, t: TensorBatch, draws: Tensors) -> torch.Tensor:
+        """Regression targets of a posterior refresh: Eq. 8's (``blr.posterior_target =
+        double``, with its draws) or y = r^k + gamma^k max_a phi_target(s')^T mean_target_a
+        (``max``, the BDQN code; no draws)."""
+        if self.blr.posterior_target == "double":
+            return self.targets(t, draws)
+        q_next_target = self.torso_target(t.next_obs_B) @ self.target_mean_AD.T
+        return t.returns_B + t.bootstrap_B * q_next_target.max(dim=1).values
+
+    def __call__(self, inputs: Tensors) -> Tensors:
+        """The loss of a minibatch (inputs: :class:`TensorBatch`'s fields, the draws, and with
+        ``k_target = max`` the one-step windows' ``one_*`` fields); in incremental mode also the
+        features and regression targets the posterior's statistics add."""
+        t = TensorBatch.of(inputs)
+        y_B = self.targets(t, inputs, inputs.get("phi_next_target_BD"))
+        if "one_next_obs_B" in inputs:  # k_target = max: same s and a, so only s', r, gamma
+            one = TensorBatch(
+                obs_B=t.obs_B,
+                next_obs_B=inputs["one_next_obs_B"],
+                actions_B=t.actions_B,
+                returns_B=inputs["one_returns_B"],
+                bootstrap_B=inputs["one_bootstrap_B"],
+            )
+            one_draws = {k[4:]: v for k, v in inputs.items() if k in ONE_STEP_DRAWS}
+            if "w_online_AD" in inputs:
+                one_draws["w_online_AD"] = inputs["w_online_AD"]
+            y_B = torch.maximum(
+                y_B, self.targets(one, one_draws, inputs.get("one_phi_next_target_BD"))
+            )
+        phi_BD = self.torso(t.obs_B)
+        q_B = (phi_BD @ self.head.mean_AD.T).gather(1, t.actions_B[:, None])[:, 0]
+        out = {"loss": td_loss(q_B, y_B, self.kind)}
+        if self.blr.mode == "incremental":  # the statistics are added outside the step
+            double = self.blr.posterior_target == "double"
+            out["phi_BD"] = phi_BD.detach()
+            out["y_post_B"] = y_B if double else self.posterior_targets(t, {})
+        return out
+
+    def draws(
+        self,
+        rows: int,
+        one_step: bool,
+        gen: torch.Generator,
+        acting_draw: Callable[[], torch.Tensor],
+    ) -> Tensors:
+        """What the targets of ``rows`` rows draw, in the order the eager targets drew them:
+        the acting draw (``blr.target = thompson``: ``acting_draw()``), or the normals of the
+        k-step target and then of the one-step target (``sample``, from ``gen``)."""
+        if self.blr.target == "thompson":
+            return {"w_online_AD": acting_draw()}
+        if self.blr.target != "sample":
+            return {}
+        draws = {"z_BAD": self.head.noise_z(rows, gen)}
+        if one_step:
+            draws["one_z_BAD"] = self.head.noise_z(rows, gen)
+        return draws
+
+    def target_features(
+        self, e_B: np.ndarray, next_B: np.ndarray, next_obs_B: torch.Tensor, prefix: str = ""
+    ) -> Tensors:
+        """``{prefix + "phi_next_target_BD": phi_target(s')}`` of a minibatch's next states
+        (logical rows ``next_B``) through the target cache; empty without one (the step then
+        runs the target torso itself)."""
+        if self.target.cache is None:
+            return {}
+        return {prefix + "phi_next_target_BD": self.target(next_obs_B, e_B, next_B)}
+
+
+ONE_STEP_DRAWS = ("one_z_BAD",)
+"""The draws of the one-step target (``k_target = max``), named ``one_`` + the k-step name."""

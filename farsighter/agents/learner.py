@@ -1,0 +1,125 @@
+"""The learner: one owner of the update's fast path for every value-based agent.
+
+An agent hands the learner its loss, ``loss(inputs) -> {"loss": ..., *extras}`` on a dictionary of
+tensors already on the device (the minibatch, and any random draws made beforehand), and the
+parameters the loss trains. The learner owns what makes an update fast and nothing of its math:
+
+* the optimizer (Table 1's RMSProp, or Adam: :func:`farsighter.agents.common.make_optimizer`),
+  gradient clipping and the optimizer step;
+* the step as a CUDA graph (``Config.cuda_graph``) or compiled (``Config.compile``), the optimizer
+  made capturable for it, and the graphs dropped after a checkpoint load rebinds state
+  (:mod:`farsighter.agents.cuda_graph`).
+
+The loss follows the rules a captured step needs (no host synchronisation, no random numbers,
+state updated in place); the agent draws what the loss needs before the call. Its checkpoint is
+the optimizer's state dict, the form agents saved before the learner existed.
+
+The target cache lives beside it, as a wrapper on the target network that clears itself when the
+target is copied: :class:`CachedTarget`.
+"""
+
+from __future__ import annotations
+
+import copy
+from collections.abc import Callable, Iterable
+from typing import Any
+
+import numpy as np
+import torch
+from torch import nn
+
+from farsighter.agents.common import clip_and_step, make_optimizer
+from farsighter.agents.cuda_graph import (
+    Tensors,
+    graphs_enabled,
+    reset_step,
+    set_capturable,
+    wrap_step,
+)
+from farsighter.config import Config
+from farsighter.replay.target_cache import TargetCache, target_cache_rows
+
+LossFn = Callable[[Tensors], Tensors]
+
+
+class Learner:
+    """Gradient steps of ``loss`` on ``params``: eager, a replayed CUDA graph, or compiled."""
+
+    def __init__(
+        self,
+        loss: LossFn,
+        params: Iterable[nn.Parameter],
+        cfg: Config,
+        device: torch.device,
+        optimizer: torch.optim.Optimizer | None = None,
+        max_grad_norm: float | None = None,
+        eager: bool = False,
+    ) -> None:
+        self.loss = loss
+        self.params = list(params)
+        self.opt = optimizer if optimizer is not None else make_optimizer(self.params, cfg)
+        self.max_grad_norm = cfg.max_grad_norm if max_grad_norm is None else max_grad_norm
+        # eager: a loss that reads the host (never captured or compiled, whatever the config)
+        self.graphs = not eager and graphs_enabled(cfg.cuda_graph, device, not cfg.compile)
+        set_capturable(self.opt, self.graphs)
+        self.step = wrap_step(self._update, self.graphs, cfg.compile and not eager)
+
+    def _update(self, inputs: Tensors) -> Tensors:
+        out = dict(self.loss(inputs))
+        clip_and_step(out["loss"], self.params, self.opt, self.max_grad_norm)
+        out["loss"] = out["loss"].detach()
+        return out
+
+    def __call__(self, inputs: Tensors) -> Tensors:
+        """One update on ``inputs``; returns the loss and the loss's extras (detached). Under a
+        CUDA graph the returned tensors are overwritten by the next update."""
+        return self.step(inputs)
+
+    def state_dict(self) -> dict[str, Any]:
+        return self.opt.state_dict()
+
+    def load_state_dict(self, state: dict[str, Any]) -> None:
+        # torch keeps the given state tensors (no copy on the same device): copy them, so that
+        # this learner never shares its optimizer state with the one that saved it
+        self.opt.load_state_dict(copy.deepcopy(state))
+        set_capturable(self.opt, self.graphs)  # a loaded state brings the saver's flags
+        reset_step(self.step)  # the optimizer's state tensors are new ones
+
+
+class CachedTarget:
+    """A target network whose outputs for replay rows are kept until it is copied into.
+
+    Called with the rows' keys (``streams``, ``rows``: the logical replay rows of the
+    observations), it runs the network over the rows not seen since the last copy only
+    (:class:`~farsighter.replay.target_cache.TargetCache`); without keys, or without a cache, it
+    is the network. The cache clears itself whenever the network's ``load_state_dict`` runs: the
+    hard target copy and a checkpoint load alike, so no owner has to remember to."""
+
+    def __init__(self, net: nn.Module, cache: TargetCache | None) -> None:
+        self.net = net
+        self.cache = cache
+        if cache is not None:
+            net.register_load_state_dict_post_hook(lambda module, keys: cache.clear())
+
+    def __call__(
+        self,
+        obs_B: torch.Tensor,
+        streams_B: np.ndarray | None = None,
+        rows_B: np.ndarray | None = None,
+    ) -> torch.Tensor:
+        if self.cache is None or streams_B is None or rows_B is None:
+            return self.net(obs_B)
+        with torch.no_grad():
+            return self.cache.lookup(
+                streams_B, rows_B, lambda i: self.net(obs_B[torch.from_numpy(i).to(obs_B.device)])
+            )
+
+
+def make_target_cache(cfg: Config, device: torch.device, width: int) -> TargetCache | None:
+    """The target cache a run gets: with ``target_cache auto``, where next states repeat within
+    a target period (minibatches from the latest N transitions: ``sample_recent``), and when the
+    step runs eagerly (a captured or compiled step runs the target network inside it)."""
+    fast = cfg.compile or graphs_enabled(cfg.cuda_graph, device, not cfg.compile)
+    if cfg.target_cache != "auto" or not cfg.sample_recent or fast:
+        return None
+    return TargetCache(cfg.num_envs, target_cache_rows(cfg), width, device)
