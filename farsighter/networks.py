@@ -10,6 +10,7 @@ optimizer state are float32 either way. The Nature CNN keeps its convolutions ch
 
 from __future__ import annotations
 
+import math
 from typing import Any, Literal
 
 import gymnasium as gym
@@ -244,3 +245,68 @@ def make_trunk(
     if not hidden_sizes:
         raise ValueError("per-head hidden layers need hidden_sizes with at least one layer")
     return MLPTorso(int(np.prod(shape)), hidden_sizes[:-1]), hidden_sizes[-1]
+
+
+class EnsembleHeads(nn.Module):
+    """K heads Linear(d, h) + ReLU + Linear(h, A) computed together: (B, d) -> Q (B, K, A).
+
+    Head k's layers are ``hidden_weight[k]``, ``hidden_bias[k]`` and ``out_weight[k]``,
+    ``out_bias[k]``, laid out and initialised as K separate ``nn.Linear`` pairs would be.
+    """
+
+    def __init__(self, in_dim: int, hidden: int, num_actions: int, num_heads: int) -> None:
+        super().__init__()
+        self.hidden_weight = nn.Parameter(torch.empty(num_heads, hidden, in_dim))
+        self.hidden_bias = nn.Parameter(torch.empty(num_heads, hidden))
+        self.out_weight = nn.Parameter(torch.empty(num_heads, num_actions, hidden))
+        self.out_bias = nn.Parameter(torch.empty(num_heads, num_actions))
+        self.reset_parameters()
+
+    @torch.no_grad()
+    def reset_parameters(self) -> None:
+        """nn.Linear's default init, head by head in the order K Sequential(Linear, ReLU, Linear)
+        would draw it, so a seed gives the same weights as separate layers."""
+        for k in range(self.hidden_weight.shape[0]):
+            for w, b in (
+                (self.hidden_weight[k], self.hidden_bias[k]),
+                (self.out_weight[k], self.out_bias[k]),
+            ):
+                nn.init.kaiming_uniform_(w, a=math.sqrt(5))
+                bound = 1.0 / math.sqrt(w.shape[1])  # fan_in
+                nn.init.uniform_(b, -bound, bound)
+
+    def forward(self, x_BD: torch.Tensor) -> torch.Tensor:
+        num_heads, hidden, _ = self.hidden_weight.shape
+        # One matmul for all K hidden layers, then one batched matmul for the K output layers.
+        w1, b1 = self.hidden_weight.flatten(0, 1), self.hidden_bias.flatten()  # (K*H, D), (K*H,)
+        h_BKH = torch.relu(nn.functional.linear(x_BD, w1, b1)).view(-1, num_heads, hidden)
+        return torch.einsum("bkh,kah->bka", h_BKH, self.out_weight) + self.out_bias
+
+
+class EnsembleQNetwork(nn.Module):
+    """Shared trunk and K heads (bootstrapped DQN's network; OB2I's, farsighter.agents.ob2i):
+    forward gives Q (B, K, A)."""
+
+    def __init__(
+        self,
+        obs_space: gym.spaces.Box,
+        num_actions: int,
+        num_heads: int,
+        hidden_sizes: tuple[int, ...],
+        separate_heads: bool = True,
+    ) -> None:
+        super().__init__()
+        self.torso: nn.Module
+        self.heads: nn.Module
+        if separate_heads:  # authors' network: every head owns the last hidden layer
+            trunk, hidden = make_trunk(obs_space, hidden_sizes)
+            self.torso = trunk
+            self.heads = EnsembleHeads(trunk.out_dim, hidden, num_actions, num_heads)
+        else:
+            self.torso = make_torso(obs_space, hidden_sizes)
+            # One Linear with K*A rows initialises each head exactly as K separate Linear(d, A).
+            self.heads = nn.Linear(self.torso.out_dim, num_heads * num_actions)
+        self.num_heads, self.num_actions = num_heads, num_actions
+
+    def forward(self, obs: torch.Tensor) -> torch.Tensor:
+        return self.heads(self.torso(obs)).view(-1, self.num_heads, self.num_actions)

@@ -296,14 +296,14 @@ def _sampled_rows(preset: str, tmp_path: Path) -> tuple[np.ndarray, int, Farsigh
         )
         obs = env.reset()[0] if end else nxt
     rows = []
-    sample = agent._sample
+    sample = agent.replay.sample
 
-    def spy():  # the minibatch each update trains on
-        batch = sample()
+    def spy(*args, **kw):  # the minibatch each update trains on
+        batch = sample(*args, **kw)
         rows.append(batch.index)
         return batch
 
-    agent._sample = spy  # type: ignore[method-assign]
+    agent.replay.sample = spy  # type: ignore[method-assign]
     for _ in range(20):
         agent.update()
     return np.concatenate(rows), 3_000, agent

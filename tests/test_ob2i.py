@@ -14,18 +14,11 @@ import torch
 from torch import nn
 
 import farsighter
-from farsighter.agents.ob2i import (
-    EnsembleHeads,
-    EnsembleQNetwork,
-    OB2IAgent,
-    backward_targets,
-    ensemble_td_loss,
-    next_state_bonus,
-    ucb_bonus,
-)
+from farsighter.agents.ob2i import OB2IAgent, ensemble_td_loss
 from farsighter.config import make_config, validate
 from farsighter.errors import ConfigError
-from farsighter.networks import make_torso
+from farsighter.networks import EnsembleHeads, EnsembleQNetwork, make_torso
+from farsighter.ops.ob2i import backward_targets, next_state_bonus, ucb_bonus
 from farsighter.replay import VectorStep
 from tests.conftest import GrabAgent, tiny
 

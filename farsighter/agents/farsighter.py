@@ -5,15 +5,11 @@ Q(s, a) = phi_theta(s)^T w_a with a Bayesian linear regression posterior over ea
 * Acting (Algorithm 2): a Thompson draw w_a = mean_a + chol(Cov_a) z (Eq. 7), one independent z
   per action and per environment; Farsighter draws afresh at every step, BDQN every T steps;
   ``blr.redraw`` also holds a draw for k steps, for a whole episode, or until the episode
-  revisits a state (farsighter.exploration). Before
-  ``learning_starts`` actions are uniform, as for the epsilon agents.
-* Learning theta (Eq. 8): the double-Q loss with w fixed at the posterior mean, on k-step
-  returns with gamma^k bootstraps (section 4.4), from the latest N transitions (Algorithm 1
-  line 4) when ``sample_recent``. With ``blr.target = sample`` a posterior draw per row is added
-  to the next state's Q in the target (optimism that propagates), and with ``k_target = max``
-  the target is never below the one-step target (both our extensions). Target network and
-  target mean are copied every N steps, after the posterior refresh when both fall on one step
-  (Algorithm 1 lines 6 then 8).
+  revisits a state (farsighter.exploration). Before ``learning_starts`` actions are uniform.
+* Learning theta (Eq. 8): :class:`~farsighter.agents.farsighter_loss.FarsighterLoss`, on k-step
+  minibatches from the latest N transitions (Algorithm 1 line 4) when ``sample_recent``. Target
+  torso and target mean are copied every N steps, after the posterior refresh when both fall on
+  one step (Algorithm 1 lines 6 then 8).
 * Posterior (Algorithm 1 line 6): every M steps, from up to D recent tuples with features of the
   current theta and targets y from the target network exactly as in Eq. 8 (batch mode), or from
   running sufficient statistics (incremental mode, the online update the paper's appendix 10
@@ -58,7 +54,7 @@ from farsighter.config import Config
 from farsighter.exploration import ThompsonExploration
 from farsighter.networks import make_torso
 from farsighter.ops.blr import BLRHead, greedy_predictive_variance
-from farsighter.replay import Batch, VectorStep
+from farsighter.replay import VectorStep
 
 FEATURE_CHUNK = 4_096  # rows per forward pass when computing features for a posterior refresh
 RECENT_FEATURES = 2_048  # incremental mode: minibatch features kept for adaptive k's Q-variance
@@ -166,17 +162,12 @@ class FarsighterAgent:
             self.loss.copy_target()  # Algorithm 1 line 8
         return metrics
 
-    def _sample(self) -> Batch | None:
-        cfg = self.cfg
-        try:
-            return sample_minibatch(self.replay, cfg, cfg.batch_size, self.counters.k)
-        except ValueError:  # not enough complete k-step windows yet
-            return None
-
     def update(self) -> torch.Tensor | None:
         """One step on theta with w at the posterior mean (Eq. 8); the BLR weights stay fixed."""
-        batch = self._sample()
-        if batch is None:
+        cfg = self.cfg
+        try:
+            batch = sample_minibatch(self.replay, cfg, cfg.batch_size, self.counters.k)
+        except ValueError:  # not enough complete k-step windows yet
             return None
         inputs = batch_tensors(batch, self.device).tensors()
         if self.cfg.k_target == "max" and self.counters.k > 1:
@@ -280,16 +271,7 @@ class FarsighterAgent:
         }
 
     # ------------------------------------------------------------------ checkpoints
-    SAVED = (
-        "torso",
-        "torso_target",
-        "head",
-        "target_mean_AD",
-        "opt",
-        "rng",
-        "gen",
-        "counters",
-    )
+    SAVED = ("torso", "torso_target", "head", "target_mean_AD", "opt", "rng", "gen", "counters")
     SAVED_AT = {  # keys of the earlier layout
         "torso_target": "loss.torso_target",
         "target_mean_AD": "loss.target_mean_AD",
@@ -314,6 +296,4 @@ class FarsighterAgent:
             self.loss.target.cache.load_state_dict(state.get("target_cache"))
 
 
-AGENT: AgentFactory = (
-    FarsighterAgent  # the class farsighter.algorithms names; mypy checks the protocol
-)
+AGENT: AgentFactory = FarsighterAgent  # the class algorithms.py names; mypy checks the protocol

@@ -11,23 +11,9 @@ Acting: one head k_e drawn uniformly per episode and environment; epsilon-greedy
 epsilon annealed linearly from eps_start to eps_end (1.0 -> 0.1). Evaluation: majority vote of
 the heads (the authors' evaluation), ties broken by the heads' mean Q.
 
-Formulas implemented (OB2I section 3; symbols as in the paper, equation numbers not repeated):
+Formulas (OB2I section 3): :mod:`farsighter.ops.ob2i` (the UCB-bonus, the next-state bonus and
+the backward induction of an episode's targets).
 
-* UCB-bonus, the std of the bootstrapped Q-estimates (OB2I's B^k):
-      B(s, a) = sqrt( (1/K) sum_k (Q_k(s, a) - mean_j Q_j(s, a))^2 )
-* For a sampled episode s_0, a_0, r_0, ..., s_T (the episodic backward update of EBU, Lee et al.
-  2019, Algorithm 2), with Q~[t] = Q_target(s_{t+1}, .) for every head (T x K x A values):
-      immediate bonus   rb_t     = alpha_1 * B_online(s_t, a_t)            (/ running std if set)
-      next bonus        nb_{t,k} = alpha_2 * B_target(s_{t+1}, a'_{t,k}) / sigma_nb
-                                   * 1[a'_{t,k} != a_{t+1}],  a'_{t,k} = argmax_a Q~_k[t, a]
-  where sigma_nb is a running std of the unnormalised next-state bonuses (OB2I's B~ term of the
-  target); the indicator (authors' code) drops the next-state bonus where a head's greedy action
-  is the action taken next, whose Q~ already holds the propagated target (which carries bonus).
-* Backward, t = T-1, ..., 0 (OB2I's optimistic target y^k_t and its backward induction):
-      y_{t,k} = r_t + rb_t                                          if t = T-1 and s_T terminal
-      y_{t,k} = r_t + rb_t + gamma * (max_a Q~_k[t, a] + nb_{t,k})   otherwise
-      Q~_k[t-1, a_t] <- beta * y_{t,k} + (1 - beta) * Q~_k[t-1, a_t]   (t >= 1: Q~[t-1] is at s_t)
-  A time-limit truncation bootstraps from the real last state s_T, as everywhere in this library.
 * Loss on a minibatch of the episode: L = mean_{b,k} huber(Q_k(s_b, a_b) - y_{b,k}) / K (the
   authors' ``gradient_norm``: the loss divided by K). As in EBU, the targets of an episode are
   computed once and consumed one minibatch per update, in chunks of batch_size going backward
@@ -37,7 +23,6 @@ Formulas implemented (OB2I section 3; symbols as in the paper, equation numbers 
 from __future__ import annotations
 
 import copy
-import math
 from dataclasses import dataclass
 from typing import Any
 
@@ -63,123 +48,16 @@ from farsighter.agents.learner import Learner
 from farsighter.agents.protocol import AgentFactory
 from farsighter.config import Config
 from farsighter.exploration.epsilon import EpisodeHeads
-from farsighter.networks import make_torso, make_trunk
+from farsighter.networks import EnsembleQNetwork
+from farsighter.ops.ob2i import backward_targets, next_state_bonus, ucb_bonus
 from farsighter.replay import Episode, VectorStep
 
 BONUS_EPS = 1e-8  # keeps the running-std division finite when every bonus is zero
 
 
-class EnsembleHeads(nn.Module):
-    """K heads Linear(d, h) + ReLU + Linear(h, A) computed together: (B, d) -> Q (B, K, A).
-
-    Head k's layers are ``hidden_weight[k]``, ``hidden_bias[k]`` and ``out_weight[k]``,
-    ``out_bias[k]``, laid out and initialised as K separate ``nn.Linear`` pairs would be.
-    """
-
-    def __init__(self, in_dim: int, hidden: int, num_actions: int, num_heads: int) -> None:
-        super().__init__()
-        self.hidden_weight = nn.Parameter(torch.empty(num_heads, hidden, in_dim))
-        self.hidden_bias = nn.Parameter(torch.empty(num_heads, hidden))
-        self.out_weight = nn.Parameter(torch.empty(num_heads, num_actions, hidden))
-        self.out_bias = nn.Parameter(torch.empty(num_heads, num_actions))
-        self.reset_parameters()
-
-    @torch.no_grad()
-    def reset_parameters(self) -> None:
-        """nn.Linear's default init, head by head in the order K Sequential(Linear, ReLU, Linear)
-        would draw it, so a seed gives the same weights as separate layers."""
-        for k in range(self.hidden_weight.shape[0]):
-            for w, b in (
-                (self.hidden_weight[k], self.hidden_bias[k]),
-                (self.out_weight[k], self.out_bias[k]),
-            ):
-                nn.init.kaiming_uniform_(w, a=math.sqrt(5))
-                bound = 1.0 / math.sqrt(w.shape[1])  # fan_in
-                nn.init.uniform_(b, -bound, bound)
-
-    def forward(self, x_BD: torch.Tensor) -> torch.Tensor:
-        num_heads, hidden, _ = self.hidden_weight.shape
-        # One matmul for all K hidden layers, then one batched matmul for the K output layers.
-        w1, b1 = self.hidden_weight.flatten(0, 1), self.hidden_bias.flatten()  # (K*H, D), (K*H,)
-        h_BKH = torch.relu(nn.functional.linear(x_BD, w1, b1)).view(-1, num_heads, hidden)
-        return torch.einsum("bkh,kah->bka", h_BKH, self.out_weight) + self.out_bias
-
-
-class EnsembleQNetwork(nn.Module):
-    """Shared trunk and K heads (module docstring, "Network"): forward gives Q (B, K, A)."""
-
-    def __init__(
-        self,
-        obs_space: gym.spaces.Box,
-        num_actions: int,
-        num_heads: int,
-        hidden_sizes: tuple[int, ...],
-        separate_heads: bool = True,
-    ) -> None:
-        super().__init__()
-        self.torso: nn.Module
-        self.heads: nn.Module
-        if separate_heads:  # authors' network: every head owns the last hidden layer
-            trunk, hidden = make_trunk(obs_space, hidden_sizes)
-            self.torso = trunk
-            self.heads = EnsembleHeads(trunk.out_dim, hidden, num_actions, num_heads)
-        else:
-            self.torso = make_torso(obs_space, hidden_sizes)
-            # One Linear with K*A rows initialises each head exactly as K separate Linear(d, A).
-            self.heads = nn.Linear(self.torso.out_dim, num_heads * num_actions)
-        self.num_heads, self.num_actions = num_heads, num_actions
-
-    def forward(self, obs: torch.Tensor) -> torch.Tensor:
-        return self.heads(self.torso(obs)).view(-1, self.num_heads, self.num_actions)
-
-
-def ucb_bonus(q_BKA: torch.Tensor) -> torch.Tensor:
-    """OB2I's UCB-bonus B(s, a): the (population) std of Q over the heads, (B, K, A) -> (B, A)."""
-    return q_BKA.std(dim=1, unbiased=False)
-
-
 def ensemble_td_loss(q_BK: torch.Tensor, y_BK: torch.Tensor, kind: str) -> torch.Tensor:
     """Every head on every sample, mean TD loss divided by K (authors' ``gradient_norm``)."""
     return td_loss(q_BK, y_BK, kind) / q_BK.shape[1]
-
-
-def next_state_bonus(
-    q_next_TKA: np.ndarray, taken_next_T: np.ndarray
-) -> tuple[np.ndarray, np.ndarray]:
-    """Unnormalised next-state bonus B_target(s_{t+1}, a'_{t,k}) at each head's greedy action
-    a'_{t,k} = argmax_a Q~_k(s_{t+1}, a), and the indicator 1[a'_{t,k} != a_{t+1}] (authors' code;
-    ``taken_next_T[t]`` is a_{t+1}, or -1 after the last step). Both (T, K)."""
-    a_star_TK = q_next_TKA.argmax(axis=2)
-    bonus_TK = np.take_along_axis(q_next_TKA.std(axis=1), a_star_TK, axis=1)
-    return bonus_TK, a_star_TK != taken_next_T[:, None]
-
-
-def backward_targets(
-    rewards_T: np.ndarray,
-    actions_T: np.ndarray,
-    q_next_TKA: np.ndarray,
-    bonus_next_TK: np.ndarray,
-    terminated: bool,
-    gamma: float,
-    beta: float,
-) -> np.ndarray:
-    """Targets y (T, K) of one episode by backward induction (EBU with OB2I's optimistic target).
-
-    ``rewards_T`` already include the immediate bonus; ``q_next_TKA[t]`` is Q_target(s_{t+1}, .)
-    per head and is not modified; ``bonus_next_TK`` is the weighted next-state bonus.
-    """
-    q_TKA = np.array(q_next_TKA, dtype=np.float64)  # a copy: the recursion overwrites it
-    length = len(rewards_T)
-    y_TK = np.empty(q_TKA.shape[:2], dtype=np.float64)
-    for t in range(length - 1, -1, -1):
-        if t == length - 1 and terminated:
-            y_TK[t] = rewards_T[t]  # a terminal end gets no bootstrap
-        else:
-            y_TK[t] = rewards_T[t] + gamma * (q_TKA[t].max(axis=1) + bonus_next_TK[t])
-        if t > 0:  # diffuse y_t into Q~(s_t, a_t), which bootstraps y_{t-1}
-            a = int(actions_T[t])
-            q_TKA[t - 1, :, a] = beta * y_TK[t] + (1.0 - beta) * q_TKA[t - 1, :, a]
-    return y_TK.astype(np.float32)
 
 
 class EnsembleLoss:
