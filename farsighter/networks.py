@@ -19,6 +19,9 @@ import torch
 from torch import nn
 from torch.nn import functional as F
 
+from farsighter.ops.bayes_layer import BayesianLinear
+from farsighter.ops.naf import NAFHead, naf_q, scale_action
+
 Precision = Literal["fp32", "bf16"]
 
 
@@ -310,3 +313,65 @@ class EnsembleQNetwork(nn.Module):
 
     def forward(self, obs: torch.Tensor) -> torch.Tensor:
         return self.heads(self.torso(obs)).view(-1, self.num_heads, self.num_actions)
+
+
+class NAFNetwork(nn.Module):
+    """NAF's network (Eq. 4; farsighter.agents.naf): phi (MLP), V and L heads (NAFHead) and the
+    mu-layer (linear, or Bayesian for bnaf and farsighter-naf)."""
+
+    def __init__(
+        self,
+        obs_dim: int,
+        low_A: np.ndarray,
+        high_A: np.ndarray,
+        hidden_sizes: tuple[int, ...],
+        *,
+        bayesian: bool,
+        prior_std: float = 0.1,
+        init_sigma: float = 0.05,
+    ) -> None:
+        super().__init__()
+        action_dim = len(low_A)
+        self.torso = MLPTorso(obs_dim, hidden_sizes)
+        d = self.torso.out_dim
+        self.head = NAFHead(d, action_dim)
+        self.mu_layer: nn.Linear | BayesianLinear = (
+            BayesianLinear(d, action_dim, prior_std=prior_std, init_sigma=init_sigma)
+            if bayesian
+            else nn.Linear(d, action_dim)
+        )
+        self.low_A: torch.Tensor
+        self.high_A: torch.Tensor
+        self.register_buffer("low_A", torch.as_tensor(low_A, dtype=torch.float32))
+        self.register_buffer("high_A", torch.as_tensor(high_A, dtype=torch.float32))
+
+    def mu_from_out(self, out_BA: torch.Tensor) -> torch.Tensor:
+        """The action mu from the mu-layer's output: tanh, then affine to the bounds."""
+        return scale_action(torch.tanh(out_BA), self.low_A, self.high_A)
+
+    def mu_out_mean(self, phi_BD: torch.Tensor, detach_weights: bool = False) -> torch.Tensor:
+        """mu-layer output with the (posterior-mean) weights; ``detach_weights`` keeps theta^a
+        out of the gradient while phi still receives it (section 4.3: theta^a fixed)."""
+        layer = self.mu_layer
+        w: torch.Tensor
+        b: torch.Tensor | None
+        if isinstance(layer, BayesianLinear):
+            w, b = layer.weight_mu, layer.bias_mu
+        else:
+            w, b = layer.weight, layer.bias
+        if detach_weights:
+            w, b = w.detach(), None if b is None else b.detach()
+        return F.linear(phi_BD, w, b)
+
+    def value(self, obs_BO: torch.Tensor) -> torch.Tensor:
+        """V(s) = max_a Q(s, a)."""
+        return self.head.v(self.torso(obs_BO)).squeeze(-1)
+
+    def q(
+        self, obs_BO: torch.Tensor, action_BA: torch.Tensor, freeze_mu: bool
+    ) -> tuple[torch.Tensor, torch.Tensor]:
+        """Q(s, a) of Eq. 4 with mu at the posterior mean, and the mu-layer's pre-tanh output."""
+        phi_BD = self.torso(obs_BO)
+        v_B, l_BAA = self.head(phi_BD)
+        out_BA = self.mu_out_mean(phi_BD, detach_weights=freeze_mu)
+        return naf_q(v_B, self.mu_from_out(out_BA), l_BAA, action_BA), out_BA

@@ -143,9 +143,9 @@ def test_naf_targets_use_the_target_value(tmp_path: Path) -> None:
     perturb(agent.net)
     t_ = minibatch(agent)
     with torch.no_grad():
-        v_target = agent.net_target.value(t_.next_obs_B)
+        v_target = agent.loss.net_target.value(t_.next_obs_B)
         v_online = agent.net.value(t_.next_obs_B)
-    y = agent.td_targets(t_)
+    y = agent.loss.targets(t_)
     assert torch.allclose(y, t_.returns_B + t_.bootstrap_B * v_target.reshape(-1), atol=1e-5)
     assert not torch.allclose(y, t_.returns_B + t_.bootstrap_B * v_online.reshape(-1), atol=1e-3)
 
@@ -357,7 +357,7 @@ def test_naf_soft_update_every_n_steps(tmp_path: Path) -> None:
         cfg, env.observation_space, env.action_space, frame_stack=1, device=CPU
     )
     rng = np.random.default_rng(0)
-    target = [p.clone() for p in agent.net_target.parameters()]
+    target = [p.clone() for p in agent.loss.net_target.parameters()]
     for step in range(1, 201):
         end = step % 50 == 0
         agent.observe(VectorStep(
@@ -367,7 +367,7 @@ def test_naf_soft_update_every_n_steps(tmp_path: Path) -> None:
             [rng.normal(size=3).astype(np.float32)] if end else None,
         ))  # fmt: skip
         agent.learn(step)
-        now = list(agent.net_target.parameters())
+        now = list(agent.loss.net_target.parameters())
         moved = any(not torch.equal(a, b) for a, b in zip(target, now, strict=True))
         assert moved == (step % 100 == 0), step  # only on the N-step boundaries
         target = [p.clone() for p in now]

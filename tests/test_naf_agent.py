@@ -97,11 +97,11 @@ def test_td_target_matches_ops(algo: str) -> None:
     t = agent._sample(64)
     assert t is not None
     with torch.no_grad():
-        v_next = agent.net_target.head.v(agent.net_target.torso(t.next_obs_B)).squeeze(-1)
+        v_next = agent.loss.net_target.head.v(agent.loss.net_target.torso(t.next_obs_B)).squeeze(-1)
     expected = naf_td_target(t.returns_B, t.bootstrap_B, v_next)
-    assert torch.allclose(agent.td_targets(t), expected)
+    assert torch.allclose(agent.loss.targets(t), expected)
     terminal = t.bootstrap_B == 0
-    assert torch.equal(agent.td_targets(t)[terminal], t.returns_B[terminal])
+    assert torch.equal(agent.loss.targets(t)[terminal], t.returns_B[terminal])
     # Q of the online network is Eq. 4 with mu at the posterior mean
     with torch.no_grad():
         phi = agent.net.torso(t.obs_B)
@@ -116,12 +116,12 @@ def test_elbo_update_changes_only_the_mu_layer() -> None:
     fill(agent)
     layer = agent.net.mu_layer
     assert isinstance(layer, BayesianLinear)
-    torso, head, target = params(agent.net.torso), params(agent.net.head), params(agent.net_target)
+    torso, head, target = params(agent.net.torso), params(agent.net.head), params(agent.loss.net_target)
     mu_before = params(layer)
     agent.elbo_update()
     assert same(torso, params(agent.net.torso))
     assert same(head, params(agent.net.head))
-    assert same(target, params(agent.net_target))
+    assert same(target, params(agent.loss.net_target))
     after = params(layer)
     for name in ("weight_mu", "weight_rho", "bias_mu", "bias_rho"):
         assert not torch.equal(mu_before[name], after[name]), name
@@ -142,14 +142,14 @@ def test_td_update_leaves_the_bayesian_mu_layer_and_trains_the_plain_one() -> No
 def test_soft_target_update_moves_by_tau() -> None:
     agent = make_agent("naf", **{"naf.tau": 0.25})
     fill(agent)
-    before = params(agent.net_target)
+    before = params(agent.loss.net_target)
     agent.update()
     online = params(agent.net)
     for name, old in before.items():
         if name in ("low_A", "high_A"):
             continue
         assert torch.allclose(
-            agent.net_target.state_dict()[name], old + 0.25 * (online[name] - old), atol=1e-6
+            agent.loss.net_target.state_dict()[name], old + 0.25 * (online[name] - old), atol=1e-6
         ), name
 
 
