@@ -49,6 +49,7 @@ def _run(tmp_path: Path, algo: str, compiled: bool, **kw: Any) -> tuple[Any, lis
     ("algo", "extra"),
     [
         ("ddqn", {}),
+        ("rnd", {}),  # DDQN's loss through the learner, on returns with the bonus
         ("farsighter", {"k_target": "max", "blr__target": "sample"}),
     ],
 )

@@ -148,6 +148,7 @@ def _params(agent: Any) -> list[torch.Tensor]:
     ("algo", "extra"),
     [
         ("ddqn", {}),
+        ("rnd", {}),
         ("bdqn", {}),
         ("farsighter", {"k_target": "max"}),  # tiny's control preset: blr.target thompson
         ("farsighter", {"k_target": "max", "blr__target": "sample"}),

@@ -4,6 +4,7 @@
 from __future__ import annotations
 
 import dataclasses
+import json
 import os
 import shutil
 from pathlib import Path
@@ -126,6 +127,11 @@ def test_tiny_study_resume_and_plot_only(tmp_path: Path) -> None:
     # one seed per agent: nothing can be decided, and the report says so instead of a verdict
     assert not any(line.endswith((": holds.", ": does not hold.")) for line in claim_lines)
     assert "percentile bootstrap" in report and "10,000 resamples" in report
+    # the code that made it: the commit of this checkout, in study.json and the report
+    made_by = json.loads((out / "study.json").read_text())["made_by"]
+    assert len(made_by) == 1 and len(made_by[0]["commit"]) == 40
+    last = report.rstrip().splitlines()[-1]
+    assert last.startswith(f"Made with commit {made_by[0]['commit'][:10]}"), last
 
     # a finished run is not redone: its files keep their modification time
     run = out / "runs" / "ddqn__s1" / "summary.json"
@@ -135,6 +141,7 @@ def test_tiny_study_resume_and_plot_only(tmp_path: Path) -> None:
     assert main(args) == 0
     assert run.stat().st_mtime_ns == stamp
     assert (unfinished / "probe.csv").exists()
+    assert json.loads((out / "study.json").read_text())["made_by"] == made_by  # same code
 
     os.remove(out / "figures" / "heatmaps.png")
     assert main(["maze", "--plot-only", str(out)]) == 0

@@ -116,7 +116,11 @@ def test_elbo_update_changes_only_the_mu_layer() -> None:
     fill(agent)
     layer = agent.net.mu_layer
     assert isinstance(layer, BayesianLinear)
-    torso, head, target = params(agent.net.torso), params(agent.net.head), params(agent.loss.net_target)
+    torso, head, target = (
+        params(agent.net.torso),
+        params(agent.net.head),
+        params(agent.loss.net_target),
+    )
     mu_before = params(layer)
     agent.elbo_update()
     assert same(torso, params(agent.net.torso))

@@ -107,7 +107,8 @@ class OB2IAgent:
             ),
         ).to(device)
         self.loss = EnsembleLoss(self.q, cfg.loss)
-        self.learner = Learner(self.loss, self.q.parameters(), cfg, device)
+        # eager: an episode's last minibatch has its own size (a graph or compilation per size)
+        self.learner = Learner(self.loss, self.q.parameters(), cfg, device, eager=True)
         self.replay = make_replay(cfg, obs_space, frame_stack, seed=cfg.seed + 1)
         self.rng = np.random.default_rng(cfg.seed + 2)
         self.explore = EpisodeHeads(cfg, self.num_actions, self.num_heads, self.rng)

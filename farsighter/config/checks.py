@@ -146,9 +146,10 @@ def _ob2i_rnd_checks(cfg: Config, spec: algorithms.Algorithm) -> list[tuple[bool
     ]
 
 
-STEP_AGENTS = ("ddqn", "farsighter")
-"""Agents whose update is one step function that can be captured as a CUDA graph or compiled
-(farsighter.agents.cuda_graph); OB2I, RND and NAF update eagerly."""
+STEP_AGENTS = ("ddqn", "farsighter", "rnd")
+"""Agents whose update the learner may capture as a CUDA graph or compile
+(farsighter.agents.learner); OB2I's minibatches change size with each episode's tail (a graph or
+a compilation per size) and NAF's update was never measured so: both run eagerly."""
 
 
 def _algorithm_checks(cfg: Config, spec: algorithms.Algorithm) -> list[tuple[bool, str]]:

@@ -25,6 +25,7 @@ import tyro
 
 from farsighter.config import Config, make_config, validate
 from farsighter.errors import ConfigError, FarsighterError
+from farsighter.provenance import code_version
 from farsighter.rundir import slug
 from farsighter.sweep.engine import (
     Backend,
@@ -372,15 +373,22 @@ def _prepare(study: Study, settings: Any, out: Path) -> list[Job]:
     out.mkdir(parents=True, exist_ok=True)
     saved = out / "study.json"
     current = json.loads(json.dumps(dataclasses.asdict(settings)))
+    made_by: list[dict[str, Any]] = []
     if saved.exists():
         # a field added since it was saved takes its default
-        previous = json.loads(json.dumps(dataclasses.asdict(settings_of(study, _read(saved)))))
+        before = _read(saved)
+        previous = json.loads(json.dumps(dataclasses.asdict(settings_of(study, before))))
         if {**previous, "workers": 0} != {**current, "workers": 0}:
             raise FarsighterError(
                 f"{out} holds a study with other settings ({saved}); use another --out or "
                 "--overwrite"
             )
-    saved.write_text(json.dumps(current, indent=2) + "\n")
+        made_by = list(before.get("made_by", []))
+    # the code of each session that ran it (a resumed study may span commits)
+    version = code_version()
+    if not made_by or made_by[-1] != version:
+        made_by.append(version)
+    saved.write_text(json.dumps({**current, "made_by": made_by}, indent=2) + "\n")
     todo = []
     for job in study.grid(settings):
         run_dir = job.run_dir(out)
@@ -456,6 +464,22 @@ def _write(study: Study, out: Path) -> None:
     saved, runs = load_runs(study, out)
     (out / "figures").mkdir(exist_ok=True)
     study.write_outputs(out, saved, runs)
+    report = out / "report.md"
+    if report.exists() and saved.get("made_by"):
+        text = report.read_text().rstrip("\n")
+        report.write_text(f"{text}\n\n{made_by_line(saved['made_by'])}\n")
+
+
+def made_by_line(made_by: list[dict[str, Any]]) -> str:
+    """The report's last line: the code the study's runs were made with (study.json's
+    ``made_by``, one entry per session that ran some of them)."""
+    names = [
+        f"commit {v['commit'][:10]}" + (" with uncommitted changes" if v.get("dirty") else "")
+        if "commit" in v
+        else f"farsighter {v.get('version', '?')} (not a git checkout)"
+        for v in made_by
+    ]
+    return "Made with " + ", then ".join(names) + " (study.json, `made_by`)."
 
 
 def load_runs(study: Study, out: Path) -> tuple[dict[str, Any], Runs]:
