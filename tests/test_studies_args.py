@@ -44,6 +44,7 @@ def test_maze_command_lines_in_use() -> None:
     assert parse(maze.STUDY, ["--plot-only", "studies/maze"]).plot_only == "studies/maze"
     # the committed study's settings are saved as today: it resumes and redraws
     saved = json.loads((ROOT / "docs/results/maze/study.json").read_text())
+    saved.pop("made_by", None)  # the code that made it
     assert saved == json.loads(json.dumps(dataclasses.asdict(everything)))
 
 
@@ -67,6 +68,7 @@ def test_robotics_command_lines_in_use() -> None:
     # without --eval-every at least two evaluations: at most half of --steps
     assert _resolved(robotics.STUDY, "--steps 200")[0].eval_every == 100
     saved = json.loads((ROOT / "docs/results/walker2d/study.json").read_text())
+    saved.pop("made_by", None)
     walker = dataclasses.replace(robotics.StudyConfig(), workers=2)
     assert saved == json.loads(json.dumps(dataclasses.asdict(walker)))
 
@@ -144,3 +146,31 @@ def test_the_command_line_answers_with_one_line() -> None:
     assert result.stderr.splitlines() == [
         "farsighter: error: --workers must be >= 0 (0: one per core; got -1)"
     ]
+
+
+def test_every_command_of_the_results_script_parses_and_checks() -> None:
+    """scripts/results.py regenerates docs/results/ with these command lines: each must parse,
+    name only known agents and pass its study's checks (a typo would fail hours in)."""
+    import importlib.util
+
+    from farsighter.studies import atari, explore, kstudy
+
+    spec = importlib.util.spec_from_file_location("results_script", ROOT / "scripts/results.py")
+    assert spec is not None and spec.loader is not None
+    script = importlib.util.module_from_spec(spec)
+    sys.modules["results_script"] = script  # dataclasses look their module up
+    spec.loader.exec_module(script)
+    studies = {
+        "maze": maze.STUDY,
+        "k-study": kstudy.STUDY,
+        "explore": explore.STUDY,
+        "atari": atari.STUDY,
+        "robotics": robotics.STUDY,
+    }
+    folders = [e.folder for e in script.ENTRIES]
+    assert len(set(folders)) == len(folders)
+    for entry in script.ENTRIES:
+        study = studies[entry.args[0]]
+        settings = settings_from(study, parse(study, list(entry.args[1:])))
+        check(study, settings)
+        assert (ROOT / "docs/results" / entry.folder).is_dir(), entry.folder

@@ -33,7 +33,18 @@ def build_agent(
         raise TypeError(f"{cfg.algo} needs a Box observation space, got {obs_space}")
     factory: AgentFactory = importlib.import_module(f"farsighter.agents.{spec.agent}").AGENT
     agent = factory(cfg, obs_space, act_space, frame_stack=frame_stack, device=device)
-    for value in vars(agent).values():  # every network the agent holds, targets included
-        if isinstance(value, torch.nn.Module):
-            set_precision(value, cfg.precision)
+    for net in networks(agent):
+        set_precision(net, cfg.precision)
     return agent
+
+
+def networks(agent: object) -> list[torch.nn.Module]:
+    """Every network an agent holds: its own attributes, and those of the objects it holds (its
+    loss owns the target networks)."""
+    found: list[torch.nn.Module] = []
+    for value in vars(agent).values():
+        inner = [] if isinstance(value, torch.nn.Module) else getattr(value, "__dict__", {})
+        for net in [value, *(inner.values() if isinstance(inner, dict) else [])]:
+            if isinstance(net, torch.nn.Module) and all(net is not f for f in found):
+                found.append(net)
+    return found

@@ -29,10 +29,12 @@ with their backward as one graph and the gradient clip with the optimizer step a
 element-wise work (on CPU into C++ loops; the convolutions stay oneDNN's). The rules above keep
 it from recompiling: tensors updated in place, draws made outside. The first update of each
 input signature compiles (about 20 s on a 2-core CPU; Inductor caches the kernels on disk). A
-second agent in the same process compiles its own guards again (quickly, from the cache); torch
-recompiles one function at most 8 times per process (``torch._dynamo.config.recompile_limit``)
-and then runs it eagerly, so a process that builds many compiled agents in turn (a study with
-``--workers 1``) runs its later ones eagerly. Graphs and compilation are not combined.
+second agent in the same process compiles its own guards again (quickly, from the cache). Every
+agent's step is the one function of :class:`farsighter.agents.learner.Learner`, and torch
+recompiles one function at most ``torch._dynamo.config.recompile_limit`` times per process
+before it runs it eagerly: a compiled run raises that limit from torch's 8 to
+:data:`RECOMPILE_LIMIT` (64), so a process that builds compiled agents in turn (a study with
+``--workers 1``) keeps its first 64 compiled. Graphs and compilation are not combined.
 """
 
 from __future__ import annotations
@@ -104,11 +106,19 @@ class GraphedStep:
 
 StepFn = Callable[[Tensors], Tensors]
 
+RECOMPILE_LIMIT = 64
+"""Compilations of the learner's step one process keeps (torch's default is 8 per function)."""
+
 
 def wrap_step(fn: StepFn, graphs: bool, compiled: bool = False) -> StepFn:
     """``fn`` compiled by ``torch.compile`` when ``compiled`` (``Config.compile``), as a
     :class:`GraphedStep` when ``graphs``, else ``fn`` itself (eager)."""
     if compiled:  # static shapes: a new batch shape compiles anew rather than going symbolic
+        # Every agent's step is the one learner's function, and each agent built in a process
+        # compiles its own guards for it (its optimizer and networks are other objects): allow
+        # many, so that a process building compiled agents in turn keeps them compiled.
+        limit = torch._dynamo.config.recompile_limit
+        torch._dynamo.config.recompile_limit = max(limit, RECOMPILE_LIMIT)
         return cast(StepFn, torch.compile(fn, dynamic=False))
     return GraphedStep(fn) if graphs else fn
 
