@@ -19,7 +19,7 @@ and the peak RSS (``ru_maxrss`` of that process) do not leak from one to the nex
 adds one Farsighter run with a ``--buffer-size`` (1M) replay: RSS counts only the pages touched,
 so the JSON also gives the replay's allocated bytes.
 
-``--compile off on`` measures each configuration eager and with ``Config.compile`` (the first
+``--compile off on`` measures each configuration eager and with ``RuntimeConfig.compile`` (the first
 update compiles inside the warm-up, outside the window). Every measurement records its minor
 page faults per step (``page_faults_per_step``).
 
@@ -169,11 +169,11 @@ def run_one(spec: dict[str, Any]) -> dict[str, Any]:
         "algo": spec["algo"],
         "num_envs": spec["num_envs"],
         "precision": spec["precision"],
-        "cuda_graph": cfg.cuda_graph,
-        "compile": cfg.compile,
-        "overlap_env": cfg.overlap_env,
-        "gpu_replay": cfg.gpu_replay,
-        "target_cache": cfg.target_cache,
+        "cuda_graph": cfg.runtime.cuda_graph,
+        "compile": cfg.runtime.compile,
+        "overlap_env": cfg.runtime.overlap_env,
+        "gpu_replay": cfg.runtime.gpu_replay,
+        "target_cache": cfg.runtime.target_cache,
         "threads": torch.get_num_threads(),
         "device": spec["device"],
         "backend": backend,
@@ -426,7 +426,10 @@ def parse_args() -> argparse.Namespace:
     p.add_argument("--precision", nargs="+", choices=["fp32", "bf16"], default=["fp32", "bf16"])
     p.add_argument("--threads", type=int, default=2, help="torch threads (CleanRL's too)")
     p.add_argument(
-        "--cuda-graph", choices=["auto", "on", "off"], default="auto", help="Config.cuda_graph"
+        "--cuda-graph",
+        choices=["auto", "on", "off"],
+        default="auto",
+        help="RuntimeConfig.cuda_graph",
     )
     p.add_argument("--warmup", type=int, help="steps before the window (2,000 CPU, 10,000 CUDA)")
     p.add_argument("--learning-starts", type=int, help="<= warmup (default: warmup)")
@@ -442,19 +445,19 @@ def parse_args() -> argparse.Namespace:
         nargs="+",
         choices=["off", "on"],
         default=["off"],
-        help="Config.compile: measure eager, compiled, or both (table keys end in _compiled)",
+        help="RuntimeConfig.compile: measure eager, compiled, or both (table keys end in _compiled)",
     )
     p.add_argument(
         "--overlap-env",
         choices=["auto", "on", "off"],
         default="auto",
-        help="Config.overlap_env (on needs --backend envpool)",
+        help="RuntimeConfig.overlap_env (on needs --backend envpool)",
     )
     p.add_argument(
-        "--gpu-replay", choices=["auto", "off"], default="auto", help="Config.gpu_replay"
+        "--gpu-replay", choices=["auto", "off"], default="auto", help="RuntimeConfig.gpu_replay"
     )
     p.add_argument(
-        "--target-cache", choices=["auto", "off"], default="auto", help="Config.target_cache"
+        "--target-cache", choices=["auto", "off"], default="auto", help="RuntimeConfig.target_cache"
     )
     p.add_argument("--repeats", type=int, default=1, help="rounds over all configurations")
     p.add_argument("--seed", type=int, default=1)

@@ -252,7 +252,7 @@ def phases(args: argparse.Namespace, spec: dict[str, Any]) -> None:
     ms = {name: 1000 * sec / steps for name, sec in timer.seconds.items()}
     timed = sum(v for k, v in ms.items() if k != "env.emulator")
     ms["loop.rest"] = 1000 * wall / steps - timed
-    if "env.emulator" in ms and cfg.overlap_env == "off":
+    if "env.emulator" in ms and cfg.runtime.overlap_env == "off":
         ms["env.wrapper"] = ms.get("env.step", 0.0) - ms["env.emulator"]
     table = {k: round(v, 4) for k, v in sorted(ms.items())}
     per_batch = {k: round(v * args.num_envs, 3) for k, v in table.items()}
@@ -269,7 +269,7 @@ def phases(args: argparse.Namespace, spec: dict[str, Any]) -> None:
             "ms_per_env_step": table,
             "ms_per_vector_step": per_batch,
             "calls": timer.calls,
-            "overlap_env": cfg.overlap_env,
+            "overlap_env": cfg.runtime.overlap_env,
             "note": "agent.act includes, on a GPU, waiting for the updates queued before it; "
             "env.emulator: envpool's calls (without overlap inside env.step, env.wrapper = "
             "env.step - env.emulator; with overlap on envpool's step thread, beside agent.learn, "

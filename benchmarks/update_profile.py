@@ -145,7 +145,9 @@ def profile_layout(
     sync()
     faults = (resource.getrusage(resource.RUSAGE_SELF).ru_minflt - faults0) / FAULT_UPDATES
     graphed = None
-    if device.type == "cuda":  # the same update captured once and replayed (Config.cuda_graph)
+    if (
+        device.type == "cuda"
+    ):  # the same update captured once and replayed (RuntimeConfig.cuda_graph)
 
         def step_fn(_: dict[str, torch.Tensor]) -> dict[str, torch.Tensor]:
             update()
@@ -156,7 +158,9 @@ def profile_layout(
         graphed = round(median_ms(lambda: step({}), sync, args.warmup, args.repeats), 3)
         set_capturable(opt, False)
     compiled = None
-    if args.compile:  # the same update through torch.compile (Config.compile); compiles first
+    if (
+        args.compile
+    ):  # the same update through torch.compile (RuntimeConfig.compile); compiles first
         compiled_update = torch.compile(update, dynamic=False)
         compiled = round(median_ms(compiled_update, sync, args.warmup, args.repeats), 3)
 

@@ -375,3 +375,26 @@ class NAFNetwork(nn.Module):
         v_B, l_BAA = self.head(phi_BD)
         out_BA = self.mu_out_mean(phi_BD, detach_weights=freeze_mu)
         return naf_q(v_B, self.mu_from_out(out_BA), l_BAA, action_BA), out_BA
+
+
+class RNDNetwork(nn.Module):
+    """RND's networks (farsighter.exploration.rnd): a torso (MLP or Nature CNN) and
+    ``extra_layers`` hidden layers, then ``feature_dim`` outputs."""
+
+    def __init__(
+        self,
+        obs_space: gym.spaces.Box,
+        hidden_sizes: tuple[int, ...],
+        feature_dim: int,
+        extra_layers: int,
+    ) -> None:
+        super().__init__()
+        self.torso = make_torso(obs_space, hidden_sizes)
+        d = self.torso.out_dim
+        layers: list[nn.Module] = []
+        for _ in range(extra_layers):
+            layers += [nn.Linear(d, d), nn.ReLU()]
+        self.head = nn.Sequential(*layers, nn.Linear(d, feature_dim))
+
+    def forward(self, x: torch.Tensor) -> torch.Tensor:
+        return self.head(self.torso(x))

@@ -3,7 +3,6 @@
 from __future__ import annotations
 
 import csv
-import dataclasses
 import os
 import shutil
 from pathlib import Path
@@ -12,6 +11,7 @@ from typing import Any
 import torch
 
 from farsighter.config import Config, load_config, save_config
+from farsighter.config.presets import flat_fields, with_values
 from farsighter.errors import RunDirError
 
 CONFIG_FILE = "config.json"
@@ -38,22 +38,28 @@ EVAL_SUCCESS_FILE = "eval_success.csv"
 EVAL_SUCCESS_COLUMNS = ("global_step", "eval_success_rate", "eval_episodes")
 
 # Fields that may differ between the original command and its --resume: where and how the run
-# continues and how long it trains, plus bookkeeping that does not change what is learned.
+# continues and how long it trains, plus bookkeeping that does not change what is learned
+# (dotted names for nested fields).
 RESUMABLE_FIELDS = {
     "resume",
     "overwrite",
     "total_steps",
-    "device",
-    "cuda_graph",
-    "compile",
-    "gpu_replay",
-    "target_cache",
+    "runtime.device",
+    "runtime.cuda_graph",
+    "runtime.compile",
+    "runtime.gpu_replay",
+    "runtime.target_cache",
     "progress",
     "run_dir",
-    "torch_threads",
+    "runtime.torch_threads",
     "log_every",
     "checkpoint_every",
 }
+
+
+def _flat(cfg: Config) -> dict[str, Any]:
+    """Every field of ``cfg`` by its dotted name."""
+    return dict(flat_fields(cfg))
 
 
 def slug(label: str) -> str:
@@ -107,10 +113,11 @@ def prepare_run_dir(cfg: Config) -> Path:
             raise RunDirError(f"cannot resume: {path} holds no run (no {CONFIG_FILE})")
         saved = load_config(path / CONFIG_FILE)
         check_same_run(cfg, saved)
+        before, given = _flat(saved), _flat(cfg)
         diffs = [
-            f"{f.name} (saved {getattr(saved, f.name)!r}, given {getattr(cfg, f.name)!r})"
-            for f in dataclasses.fields(Config)
-            if f.name not in RESUMABLE_FIELDS and getattr(saved, f.name) != getattr(cfg, f.name)
+            f"{name} (saved {before[name]!r}, given {given[name]!r})"
+            for name in given
+            if name not in RESUMABLE_FIELDS and before[name] != given[name]
         ]
         if diffs:
             raise RunDirError(
@@ -120,7 +127,7 @@ def prepare_run_dir(cfg: Config) -> Path:
             )
         # Record what this resume changed (where the run lives and the flags stay as saved).
         recorded = sorted(RESUMABLE_FIELDS - {"resume", "overwrite", "run_dir"})
-        updated = dataclasses.replace(saved, **{name: getattr(cfg, name) for name in recorded})
+        updated = with_values(saved, {name: given[name] for name in recorded})
         if updated != saved:
             try:
                 save_config(updated, path / CONFIG_FILE)

@@ -46,7 +46,7 @@ def keep_heap() -> bool:
 
 def prepare_process(torch_threads: int) -> None:
     """What :func:`farsighter.train.train` sets before it builds the agent: torch's threads
-    (``Config.torch_threads``; 0 leaves torch's default) and :func:`keep_heap`."""
+    (``RuntimeConfig.torch_threads``; 0 leaves torch's default) and :func:`keep_heap`."""
     if torch_threads:
         torch.set_num_threads(torch_threads)
     keep_heap()

@@ -76,14 +76,18 @@ def train_seeds(
     hooks = {cfg.seed: list(callbacks[i]) if callbacks else [] for i, cfg in enumerate(cfgs)}
     summaries: dict[int, dict[str, Any]] = {}
     for group in _groups(cfgs) if batched else [[c] for c in cfgs]:
-        reason = _batch_refusal(group[0], resolve_device(group[0].device)) if len(group) > 1 else ""
+        reason = (
+            _batch_refusal(group[0], resolve_device(group[0].runtime.device))
+            if len(group) > 1
+            else ""
+        )
         if reason:
             print(f"farsighter: {reason}; these {len(group)} seeds train in turn", file=sys.stderr)
         if reason or len(group) == 1:
             for cfg in group:
                 summaries[cfg.seed] = train(cfg, callbacks=hooks[cfg.seed])
             continue
-        device = resolve_device(group[0].device)
+        device = resolve_device(group[0].runtime.device)
         for summary in _train_batch(group, [hooks[c.seed] for c in group], device):
             summaries[summary["seed"]] = summary
     return [summaries[cfg.seed] for cfg in cfgs]
@@ -92,7 +96,7 @@ def train_seeds(
 def batchable(cfg: Config) -> bool:
     """Whether seeds of ``cfg`` train as one batch here (its agent has a seed-batched form for
     its spaces and settings)."""
-    return not _batch_refusal(cfg, resolve_device(cfg.device))
+    return not _batch_refusal(cfg, resolve_device(cfg.runtime.device))
 
 
 def _groups(cfgs: Sequence[Config]) -> list[list[Config]]:
@@ -145,7 +149,7 @@ def _train_batch(
     obs_space, act_space = envs[0].single_observation_space, envs[0].single_action_space
     assert isinstance(obs_space, gym.spaces.Box) and isinstance(act_space, gym.spaces.Discrete)
     paths = [prepare_run_dir(c) for c in cfgs]
-    prepare_process(cfg.torch_threads)
+    prepare_process(cfg.runtime.torch_threads)
     batch = SeedBatchDDQN(cfgs, obs_space, act_space, device=device)
     members = [batch.member(s) for s in range(len(cfgs))]
     runs: list[_Seed] = []

@@ -42,7 +42,7 @@ def resolve_device(name: str) -> torch.device:
 
 
 def overlap_enabled(setting: str, envs: gym.vector.VectorEnv, device: torch.device) -> bool:
-    """Whether the loop steps ``envs`` while it updates (``Config.overlap_env``): ``on`` when the
+    """Whether the loop steps ``envs`` while it updates (``RuntimeConfig.overlap_env``): ``on`` when the
     environments can (``step_async`` / ``step_wait``; refused with ConfigError where they
     cannot), ``auto`` when they can and the device is CUDA, ``off`` never."""
     can = callable(getattr(envs, "step_async", None)) and callable(getattr(envs, "step_wait", None))
@@ -60,17 +60,17 @@ def train(cfg: Config, callbacks: Sequence[Callback] = ()) -> dict[str, Any]:
     ``callbacks`` see every vector step's ``info`` and the agent, read-only by contract."""
     check_same_run(cfg)  # a resume as another algorithm or env: said so before validate
     validate(cfg)
-    device = resolve_device(cfg.device)
-    graphs_enabled(cfg.cuda_graph, device)  # cuda_graph on with no GPU: refused
-    check_compiler(cfg.compile, device)  # compile on a CPU without a C++ compiler: refused
+    device = resolve_device(cfg.runtime.device)
+    graphs_enabled(cfg.runtime.cuda_graph, device)  # cuda_graph on with no GPU: refused
+    check_compiler(cfg.runtime.compile, device)  # compile on a CPU without a C++ compiler: refused
     envs: gym.vector.VectorEnv = make_vector_env(
         cfg, seed=cfg.seed
     )  # a bad id fails before the run dir is touched
     obs_space, act_space = envs.single_observation_space, envs.single_action_space
     check_spaces(cfg.algo, obs_space, act_space)
-    overlap = overlap_enabled(cfg.overlap_env, envs, device)
+    overlap = overlap_enabled(cfg.runtime.overlap_env, envs, device)
     path = prepare_run_dir(cfg)
-    prepare_process(cfg.torch_threads)
+    prepare_process(cfg.runtime.torch_threads)
     agent = build_agent(cfg, obs_space, act_space, frame_stack=frame_stack_of(cfg), device=device)
     if cfg.resume:
         state, envs, obs = restore_run(path, cfg, agent, envs)

@@ -81,13 +81,23 @@ def test_device_threads_precision_and_compile_reach_every_run(tmp_path: Path) ->
     task = tasks(study)[0]
     for agent in AGENTS:
         cfg = run_config(agent, study, 1, tmp_path, task)
-        assert (cfg.device, cfg.torch_threads, cfg.precision) == ("cuda:1", 4, "bf16")
-        assert cfg.compile == (agent.label != "OB2I")  # OB2I's update is not one step function
+        assert (cfg.runtime.device, cfg.runtime.torch_threads, cfg.runtime.precision) == (
+            "cuda:1",
+            4,
+            "bf16",
+        )
+        assert cfg.runtime.compile == (
+            agent.label != "OB2I"
+        )  # OB2I's update is not one step function
     flags = "--games Pong --device cuda:1 --threads 4 --precision bf16 --compile".split()
     assert settings_from(atari.STUDY, parse(atari.STUDY, flags)) == study
     default = run_config(AGENTS[2], StudyConfig(), 1, tmp_path, task)
-    assert (default.device, default.torch_threads, default.precision) == ("cpu", 1, "fp32")
-    assert default.compile is False
+    assert (default.runtime.device, default.runtime.torch_threads, default.runtime.precision) == (
+        "cpu",
+        1,
+        "fp32",
+    )
+    assert default.runtime.compile is False
 
 
 def _run(task: str, seed: int, finals: list[float]) -> dict[str, object]:

@@ -167,3 +167,15 @@ def test_parse_errors_exit_2_without_traceback(args: list[str]) -> None:
         timeout=300,
     )
     assert res.returncode == 2 and "Traceback" not in res.stderr, res.stderr
+
+
+def test_a_config_saved_before_the_runtime_section_loads_its_runtime_fields() -> None:
+    from farsighter.config import config_from_dict, config_to_dict, make_config
+
+    cfg = make_config("farsighter", "CartPole-v1", device="cpu", torch_threads=3, precision="bf16")
+    assert (cfg.runtime.device, cfg.runtime.torch_threads) == ("cpu", 3)  # plain names work
+    flat = config_to_dict(cfg)
+    runtime = flat.pop("runtime")
+    flat.update(runtime)  # the layout of a run directory written before the section existed
+    assert config_from_dict(flat) == cfg
+    assert config_from_dict(config_to_dict(cfg)) == cfg

@@ -78,4 +78,5 @@ def test_precision_is_validated() -> None:
     import dataclasses
 
     with pytest.raises(ConfigError, match="precision must be fp32 or bf16"):
-        validate(dataclasses.replace(cfg, precision="fp16"))  # type: ignore[arg-type]
+        runtime = dataclasses.replace(cfg.runtime, precision="fp16")  # type: ignore[arg-type]
+        validate(dataclasses.replace(cfg, runtime=runtime))

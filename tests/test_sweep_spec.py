@@ -100,7 +100,7 @@ def test_grid_expands_in_order_with_every_value(tmp_path: Path) -> None:
         assert cfg.total_steps == 20000
         assert cfg.hidden_sizes == (32, 32)  # a TOML list becomes the field's tuple
         assert cfg.preset == "cartpole" and cfg.run_dir == run_dir
-        assert cfg.progress is False and cfg.torch_threads == 1
+        assert cfg.progress is False and cfg.runtime.torch_threads == 1
         if trial.agent == "Farsighter-adaptive":
             assert cfg.algo == "farsighter" and trial.algo == "farsighter"
             assert cfg.adaptive_k.enabled is True
@@ -143,13 +143,18 @@ gamma = 0.7
 lr = 0.02
 """
     a, plain = load_spec(_write(tmp_path, text)).trials
-    assert dict(a.overrides) == {"gamma": 0.9, "lr": 0.02, "batch_size": 16, "torch_threads": 2}
+    assert dict(a.overrides) == {
+        "gamma": 0.9,
+        "lr": 0.02,
+        "batch_size": 16,
+        "runtime.torch_threads": 2,  # a runtime field by its plain name
+    }
     assert a.preset == "maze" and plain.preset == "control"
     cfg_a, cfg_plain = a.config("a"), plain.config("b")
     assert cfg_a.gamma == cfg_plain.gamma == 0.9  # grid beats agent beats set
     assert (cfg_a.lr, cfg_plain.lr) == (0.02, 0.01)
     assert cfg_a.batch_size == cfg_plain.batch_size == 16
-    assert cfg_a.torch_threads == 2  # [set] may choose the threads
+    assert cfg_a.runtime.torch_threads == 2  # [set] may choose the threads
     assert cfg_a.eval_max_steps == 200  # the maze preset's
 
 

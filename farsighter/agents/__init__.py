@@ -34,7 +34,7 @@ def build_agent(
     factory: AgentFactory = importlib.import_module(f"farsighter.agents.{spec.agent}").AGENT
     agent = factory(cfg, obs_space, act_space, frame_stack=frame_stack, device=device)
     for net in networks(agent):
-        set_precision(net, cfg.precision)
+        set_precision(net, cfg.runtime.precision)
     return agent
 
 

@@ -47,7 +47,7 @@ def make_replay(
 ) -> ReplayBuffer:
     """A replay buffer sized for the run; uint8 images keep one byte per pixel. Discrete actions
     are stored as int32; Box actions (``act_space``) as float32 vectors of their shape. On a CUDA
-    ``device`` with ``cfg.gpu_replay`` auto, observations are mirrored there (minibatches are
+    ``device`` with ``cfg.runtime.gpu_replay`` auto, observations are mirrored there (minibatches are
     gathered on the GPU: :func:`sample_minibatch`)."""
     shape = obs_space.shape
     assert shape is not None
@@ -83,11 +83,11 @@ def uses_gpu_replay(
     bytes_per_row: int = 0,
     free_bytes: int | None = None,
 ) -> bool:
-    """``cfg.gpu_replay`` auto on a CUDA device, when the mirror (``buffer_size`` rows of
+    """``cfg.runtime.gpu_replay`` auto on a CUDA device, when the mirror (``buffer_size`` rows of
     ``bytes_per_row``) fits in half the device's free memory (``free_bytes``, asked of the device
     when not given). A mirror that does not fit is left out with a warning (several runs sharing
     one GPU with big buffers): the minibatches are the same, gathered on the host."""
-    if device is None or torch.device(device).type != "cuda" or cfg.gpu_replay != "auto":
+    if device is None or torch.device(device).type != "cuda" or cfg.runtime.gpu_replay != "auto":
         return False
     need = cfg.buffer_size * bytes_per_row
     if free_bytes is None:
@@ -404,38 +404,3 @@ def greedy_actions(q_net: nn.Module, obs_E: np.ndarray, device: torch.device) ->
     version counters): the Q-values go straight to numpy, so nothing made here is kept."""
     with torch.inference_mode():
         return q_net(obs_tensor(obs_E, device)).argmax(dim=1).cpu().numpy()
-
-
-class RunningMeanStd:
-    """Running mean and variance over batches (Chan et al.'s parallel update, as in OpenAI
-    baselines' ``RunningMeanStd``, which RND and OB2I's code use to normalise bonuses)."""
-
-    def __init__(self, shape: tuple[int, ...] = (), epsilon: float = 1e-4) -> None:
-        self.mean = np.zeros(shape, dtype=np.float64)
-        self.var = np.ones(shape, dtype=np.float64)
-        self.count = epsilon  # a tiny prior count keeps the first update well defined
-
-    def update(self, x_N: np.ndarray) -> None:
-        """Add the rows of ``x_N`` (the first axis indexes samples)."""
-        x = np.asarray(x_N, dtype=np.float64).reshape(-1, *self.mean.shape)
-        if len(x) == 0:
-            return
-        batch_mean, batch_var, n = x.mean(axis=0), x.var(axis=0), len(x)
-        delta = batch_mean - self.mean
-        total = self.count + n
-        self.mean = self.mean + delta * n / total
-        m2 = self.var * self.count + batch_var * n + delta**2 * self.count * n / total
-        self.var = m2 / total
-        self.count = total
-
-    @property
-    def std(self) -> np.ndarray:
-        return np.sqrt(self.var)
-
-    def state_dict(self) -> dict[str, Any]:
-        return {"mean": self.mean.copy(), "var": self.var.copy(), "count": self.count}
-
-    def load_state_dict(self, state: dict[str, Any]) -> None:
-        self.mean = np.array(state["mean"], dtype=np.float64)
-        self.var = np.array(state["var"], dtype=np.float64)
-        self.count = float(state["count"])

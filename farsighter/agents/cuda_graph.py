@@ -22,7 +22,7 @@ do not need a GPU): read parameters, buffers and other tensors that are only eve
 (:func:`set_capturable`); no host synchronisation (``.item()``, ``.cpu()``), no data-dependent
 Python control flow and no random numbers inside.
 
-**Compiled instead** (``Config.compile``; measured and tested on CPU only): :func:`wrap_step`
+**Compiled instead** (``RuntimeConfig.compile``; measured and tested on CPU only): :func:`wrap_step`
 hands the same step function to ``torch.compile``. Dynamo compiles the forward, target and loss
 with their backward as one graph and the gradient clip with the optimizer step as others (the
 ``zero_grad`` and ``backward()`` calls between them break the graph), and Inductor fuses their
@@ -111,7 +111,7 @@ RECOMPILE_LIMIT = 64
 
 
 def wrap_step(fn: StepFn, graphs: bool, compiled: bool = False) -> StepFn:
-    """``fn`` compiled by ``torch.compile`` when ``compiled`` (``Config.compile``), as a
+    """``fn`` compiled by ``torch.compile`` when ``compiled`` (``RuntimeConfig.compile``), as a
     :class:`GraphedStep` when ``graphs``, else ``fn`` itself (eager)."""
     if compiled:  # static shapes: a new batch shape compiles anew rather than going symbolic
         # Every agent's step is the one learner's function, and each agent built in a process
@@ -124,7 +124,7 @@ def wrap_step(fn: StepFn, graphs: bool, compiled: bool = False) -> StepFn:
 
 
 def check_compiler(compiled: bool, device: torch.device | str) -> None:
-    """``Config.compile`` on a CPU needs a C++ compiler for Inductor's kernels: refused up front
+    """``RuntimeConfig.compile`` on a CPU needs a C++ compiler for Inductor's kernels: refused up front
     (ConfigError) rather than at the first update."""
     if compiled and torch.device(device).type == "cpu" and not _cxx():
         raise ConfigError(

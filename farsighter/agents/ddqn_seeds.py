@@ -53,7 +53,7 @@ def supports(cfg: Config, obs_space: gym.Space | None, device: torch.device) -> 
         return f"{cfg.algo} trains its seeds one at a time (batched: ddqn, kddqn)"
     if not isinstance(obs_space, gym.spaces.Box) or len(obs_space.shape or ()) == 3:
         return "image observations train their seeds one at a time (batched: flat observations)"
-    if cfg.precision != "fp32" or cfg.compile or cfg.cuda_graph == "on":
+    if cfg.runtime.precision != "fp32" or cfg.runtime.compile or cfg.runtime.cuda_graph == "on":
         return "precision bf16, compile and cuda_graph train their seeds one at a time"
     return ""
 

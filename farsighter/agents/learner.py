@@ -6,9 +6,9 @@ parameters the loss trains. The learner owns what makes an update fast and nothi
 
 * the optimizer (Table 1's RMSProp, or Adam: :func:`farsighter.agents.common.make_optimizer`),
   gradient clipping and the optimizer step;
-* the step as a CUDA graph (``Config.cuda_graph``) or compiled (``Config.compile``), the optimizer
-  made capturable for it, and the graphs dropped after a checkpoint load rebinds state
-  (:mod:`farsighter.agents.cuda_graph`).
+* the step as a CUDA graph (``RuntimeConfig.cuda_graph``) or compiled
+  (``RuntimeConfig.compile``), the optimizer made capturable for it, and the graphs dropped
+  after a checkpoint load rebinds state (:mod:`farsighter.agents.cuda_graph`).
 
 The loss follows the rules a captured step needs (no host synchronisation, no random numbers,
 state updated in place); the agent draws what the loss needs before the call. Its checkpoint is
@@ -60,9 +60,11 @@ class Learner:
         self.opt = optimizer if optimizer is not None else make_optimizer(self.params, cfg)
         self.max_grad_norm = cfg.max_grad_norm if max_grad_norm is None else max_grad_norm
         # eager: a loss that reads the host (never captured or compiled, whatever the config)
-        self.graphs = not eager and graphs_enabled(cfg.cuda_graph, device, not cfg.compile)
+        self.graphs = not eager and graphs_enabled(
+            cfg.runtime.cuda_graph, device, not cfg.runtime.compile
+        )
         set_capturable(self.opt, self.graphs)
-        self.step = wrap_step(self._update, self.graphs, cfg.compile and not eager)
+        self.step = wrap_step(self._update, self.graphs, cfg.runtime.compile and not eager)
 
     def _update(self, inputs: Tensors) -> Tensors:
         out = dict(self.loss(inputs))
@@ -119,7 +121,9 @@ def make_target_cache(cfg: Config, device: torch.device, width: int) -> TargetCa
     """The target cache a run gets: with ``target_cache auto``, where next states repeat within
     a target period (minibatches from the latest N transitions: ``sample_recent``), and when the
     step runs eagerly (a captured or compiled step runs the target network inside it)."""
-    fast = cfg.compile or graphs_enabled(cfg.cuda_graph, device, not cfg.compile)
-    if cfg.target_cache != "auto" or not cfg.sample_recent or fast:
+    fast = cfg.runtime.compile or graphs_enabled(
+        cfg.runtime.cuda_graph, device, not cfg.runtime.compile
+    )
+    if cfg.runtime.target_cache != "auto" or not cfg.sample_recent or fast:
         return None
     return TargetCache(cfg.num_envs, target_cache_rows(cfg), width, device)

@@ -33,7 +33,6 @@ from torch import nn
 
 from farsighter.agents.common import (
     Counters,
-    RunningMeanStd,
     build_seeded,
     load_state,
     make_replay,
@@ -50,6 +49,7 @@ from farsighter.config import Config
 from farsighter.exploration.epsilon import EpisodeHeads
 from farsighter.networks import EnsembleQNetwork
 from farsighter.ops.ob2i import backward_targets, next_state_bonus, ucb_bonus
+from farsighter.ops.running import RunningMeanStd
 from farsighter.replay import Episode, VectorStep
 
 BONUS_EPS = 1e-8  # keeps the running-std division finite when every bonus is zero

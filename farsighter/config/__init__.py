@@ -25,6 +25,7 @@ from farsighter.config.fields import (
     NAFConfig,
     OB2IConfig,
     RNDConfig,
+    RuntimeConfig,
 )
 from farsighter.config.files import config_from_dict, config_to_dict, load_config, save_config
 from farsighter.config.presets import (
@@ -49,6 +50,7 @@ __all__ = [
     "OB2IConfig",
     "Preset",
     "RNDConfig",
+    "RuntimeConfig",
     "config_from_dict",
     "config_layers",
     "config_to_dict",

@@ -5,7 +5,9 @@ from __future__ import annotations
 
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Literal
+from typing import Annotated, Literal
+
+import tyro
 
 
 @dataclass(frozen=True)
@@ -56,6 +58,18 @@ class BLRConfig:
     and posterior mean, value under the target network and target mean), or the plain
     max_a phi_target(s')^T mean_target_a (the BDQN authors' code)."""
 
+    def checks(self) -> list[tuple[bool, str]]:
+        """(holds, what was wrong and what is accepted) for each field of this section."""
+        return [
+            (self.prior_std > 0, f"blr.prior_std must be > 0 (got {self.prior_std})"),
+            (self.noise_std > 0, f"blr.noise_std must be > 0 (got {self.noise_std})"),
+            (self.cov_scale > 0, f"blr.cov_scale must be > 0 (got {self.cov_scale})"),
+            (0 < self.forgetting <= 1, "blr.forgetting must be in (0, 1]"),
+            (self.posterior_every >= 1, "blr.posterior_every must be >= 1"),
+            (self.posterior_samples >= 1, "blr.posterior_samples must be >= 1"),
+            (self.redraw_every >= 1, "blr.redraw_every must be >= 1"),
+        ]
+
 
 @dataclass(frozen=True)
 class AdaptiveKConfig:
@@ -75,6 +89,15 @@ class AdaptiveKConfig:
     empty_every_refresh: bool = False
     """Empty the replay buffer after every posterior refresh whether k changed or not, as
     Algorithm 1 line 7 reads literally ('...; Empty Replay buffer.' follows both branches)."""
+
+    def checks(self) -> list[tuple[bool, str]]:
+        """(holds, what was wrong and what is accepted) for each field of this section."""
+        return [
+            (
+                1 <= self.k_min <= self.k_max,
+                "adaptive_k bounds must satisfy 1 <= k_min <= k_max",
+            ),
+        ]
 
 
 @dataclass(frozen=True)
@@ -108,6 +131,29 @@ class AtariConfig:
     """Emulator frames after which ALE truncates an episode, no-ops included (108,000 frames =
     30 minutes of play; ALE v5's max_num_frames_per_episode, Machado et al. 2018); training
     and evaluation."""
+
+    def checks(self) -> list[tuple[bool, str]]:
+        """(holds, what was wrong and what is accepted) for each field of this section."""
+        return [
+            (self.frame_skip >= 1, f"atari.frame_skip must be >= 1 (got {self.frame_skip})"),
+            (self.frame_stack >= 1, f"atari.frame_stack must be >= 1 (got {self.frame_stack})"),
+            (self.noop_max >= 0, f"atari.noop_max must be >= 0 (got {self.noop_max})"),
+            (
+                self.envpool_threads >= 0,
+                f"atari.envpool_threads must be >= 0 (0: one per environment; got "
+                f"{self.envpool_threads})",
+            ),
+            (
+                0.0 <= self.repeat_action_probability <= 1.0,
+                "atari.repeat_action_probability must be in [0, 1] (0.25: sticky actions, "
+                f"Machado et al. 2018; got {self.repeat_action_probability})",
+            ),
+            (
+                self.max_frames_per_episode >= 0,
+                "atari.max_frames_per_episode must be >= 0 (0: no cap; got "
+                f"{self.max_frames_per_episode})",
+            ),
+        ]
 
 
 @dataclass(frozen=True)
@@ -176,6 +222,38 @@ class NAFConfig:
     her_ratio: float = 0.8
     """Fraction of relabelled samples; 0.8 is the paper's future_k = 4 (1 - 1 / (1 + 4))."""
 
+    def checks(self) -> list[tuple[bool, str]]:
+        """(holds, what was wrong and what is accepted) for each field of this section."""
+        return [
+            (0.0 < self.tau <= 1.0, f"naf.tau must be in (0, 1] (got {self.tau})"),
+            (self.updates_per_step >= 1, "naf.updates_per_step must be >= 1"),
+            (self.noise_std >= 0, f"naf.noise_std must be >= 0 (got {self.noise_std})"),
+            (0.0 < self.ou_theta <= 1.0, f"naf.ou_theta must be in (0, 1] (got {self.ou_theta})"),
+            (
+                len(self.hidden_sizes) >= 1 and all(h > 0 for h in self.hidden_sizes),
+                "naf.hidden_sizes must be one or more positive integers",
+            ),
+            (self.prior_std > 0, f"naf.prior_std must be > 0 (got {self.prior_std})"),
+            (self.init_sigma > 0, f"naf.init_sigma must be > 0 (got {self.init_sigma})"),
+            (
+                self.noise_std_eps > 0,
+                f"naf.noise_std_eps must be > 0 (got {self.noise_std_eps})",
+            ),
+            (self.elbo_every >= 1, "naf.elbo_every must be >= 1"),
+            (self.elbo_steps >= 0, "naf.elbo_steps must be >= 0"),
+            (self.elbo_batch >= 1, "naf.elbo_batch must be >= 1"),
+            (
+                self.elbo_lr > 0 and self.elbo_rho_lr > 0,
+                "naf.elbo_lr and naf.elbo_rho_lr must be > 0",
+            ),
+            (self.kl_weight >= 0, "naf.kl_weight must be >= 0"),
+            (self.mu_penalty >= 0, "naf.mu_penalty must be >= 0"),
+            (
+                0.0 <= self.her_ratio <= 1.0,
+                f"naf.her_ratio must be in [0, 1] (got {self.her_ratio})",
+            ),
+        ]
+
 
 @dataclass(frozen=True)
 class OB2IConfig:
@@ -209,6 +287,19 @@ class OB2IConfig:
     """Greedy (evaluation) action: majority vote of the heads (the authors' evaluation), ties
     broken by the mean Q; or the argmax of the heads' mean Q."""
 
+    def checks(self) -> list[tuple[bool, str]]:
+        """(holds, what was wrong and what is accepted) for each field of this section."""
+        return [
+            (self.num_heads >= 2, f"ob2i.num_heads must be >= 2 (got {self.num_heads})"),
+            (0.0 <= self.beta <= 1.0, f"ob2i.beta must be in [0, 1] (got {self.beta})"),
+            (self.bonus_reward_weight >= 0, "ob2i.bonus_reward_weight must be >= 0"),
+            (self.bonus_next_weight >= 0, "ob2i.bonus_next_weight must be >= 0"),
+            (
+                self.eval_policy in ("vote", "mean"),
+                "ob2i.eval_policy must be 'vote' or 'mean'",
+            ),
+        ]
+
 
 @dataclass(frozen=True)
 class RNDConfig:
@@ -228,25 +319,27 @@ class RNDConfig:
     obs_clip: float = 5.0
     """Whitened observations are clipped to [-obs_clip, obs_clip] (RND paper: 5)."""
 
+    def checks(self) -> list[tuple[bool, str]]:
+        """(holds, what was wrong and what is accepted) for each field of this section."""
+        return [
+            (
+                self.intrinsic_weight >= 0,
+                f"rnd.intrinsic_weight must be >= 0 (got {self.intrinsic_weight})",
+            ),
+            (self.feature_dim >= 1, f"rnd.feature_dim must be >= 1 (got {self.feature_dim})"),
+            (self.lr > 0, f"rnd.lr must be > 0 (got {self.lr})"),
+            (self.obs_clip > 0, f"rnd.obs_clip must be > 0 (got {self.obs_clip})"),
+        ]
+
 
 @dataclass(frozen=True)
-class Config:
-    """One training run: everything needed to reproduce it."""
+class RuntimeConfig:
+    """How a run is computed, apart from what it learns: the device, the arithmetic and the
+    fast paths of the update and of the loop. On the command line these keep their plain names
+    (``--device``, ``--torch-threads``, ...). Every setting but ``precision`` and
+    ``overlap_env`` may change on ``--resume``; those two change what is learned (bf16
+    rounding; updates that see the replay one vector step older)."""
 
-    algo: str = "ddqn"
-    """Algorithm: one of ddqn, kddqn, bdqn, farsighter, ob2i, rnd, krnd (discrete actions); naf,
-    knaf, bnaf, farsighter-naf (continuous). farsighter.algorithms is the table."""
-    env: str = "CartPole-v1"
-    """Any Gymnasium id, passed to gymnasium.make unchanged (``module:EnvId`` works)."""
-    seed: int = 1
-    """Seed of the run (networks, exploration, replay sampling, environments)."""
-    total_steps: int = 100_000
-    """Environment steps to train for (summed over vectorised environments)."""
-    run_dir: str = ""
-    """Run directory; empty means runs/<env>__<algo>__s<seed>."""
-    preset: str = "auto"
-    """Preset the defaults came from (auto: atari for Atari ids, continuous for the NAF agents,
-    general otherwise)."""
     device: str = "auto"
     """auto (CUDA when present, else CPU), cpu, cuda or cuda:N."""
     precision: Literal["fp32", "bf16"] = "fp32"
@@ -262,8 +355,8 @@ class Config:
     """Capture the update step (forward, loss, backward, optimizer) as a CUDA graph and replay it
     each update, so the host launches it once instead of kernel by kernel
     (farsighter.agents.cuda_graph). auto: on a CUDA device, for the agents whose update allows
-    it (ddqn, kddqn, bdqn, farsighter); on: insist (refused for the others, and on CPU); off:
-    eager. The updates are the same either way. Off when compile is on."""
+    it (ddqn, kddqn, bdqn, farsighter, rnd, krnd); on: insist (refused for the others, and on
+    CPU); off: eager. The updates are the same either way. Off when compile is on."""
     overlap_env: Literal["auto", "on", "off"] = "auto"
     """Step the environments while the updates run: at each vector step the actions are sent,
     the updates owed are made while the games step on their own threads, and the step's
@@ -287,11 +380,66 @@ class Config:
     minibatch."""
     compile: bool = False
     """torch.compile the update step (forward, target, loss, backward, clip, optimizer) of
-    ddqn, kddqn, bdqn and farsighter (farsighter.agents.cuda_graph.wrap_step): fused
+    ddqn, kddqn, bdqn, farsighter, rnd and krnd (farsighter.agents.learner): fused
     element-wise work, on CPU in C++. The first update compiles (about 20 s on a 2-core CPU; a
     few seconds once the kernels are in Inductor's disk cache), and a CPU needs a C++ compiler.
     The math is the same; the float rounding differs from eager. Measured and tested on CPU;
     docs/design.md gives its speed."""
+    torch_threads: int = 0
+    """CPU threads for torch (0: torch's default)."""
+
+    def checks(self) -> list[tuple[bool, str]]:
+        """(holds, what was wrong and what is accepted) for each field of this section (which
+        agents allow a CUDA graph or compile: farsighter.config.checks)."""
+        device_ok = self.device in ("auto", "cpu", "cuda") or self.device.startswith("cuda:")
+        return [
+            (self.torch_threads >= 0, "torch_threads must be >= 0"),
+            (
+                self.precision in ("fp32", "bf16"),
+                f"precision must be fp32 or bf16 (got {self.precision!r})",
+            ),
+            (device_ok, f"unknown device '{self.device}'; accepted: auto, cpu, cuda, cuda:N"),
+            (
+                self.cuda_graph in ("auto", "on", "off"),
+                f"cuda_graph must be auto, on or off (got {self.cuda_graph!r})",
+            ),
+            (
+                self.overlap_env in ("auto", "on", "off"),
+                f"overlap_env must be auto, on or off (got {self.overlap_env!r})",
+            ),
+            (
+                self.gpu_replay in ("auto", "off"),
+                f"gpu_replay must be auto or off (got {self.gpu_replay!r})",
+            ),
+            (
+                self.cuda_graph != "on" or self.device != "cpu",
+                "cuda_graph on needs a CUDA device (device cpu given); use auto or off",
+            ),
+            (
+                not (self.compile and self.cuda_graph == "on"),
+                "compile and cuda_graph on do not combine; use cuda_graph auto or off with compile",
+            ),
+        ]
+
+
+@dataclass(frozen=True)
+class Config:
+    """One training run: everything needed to reproduce it."""
+
+    algo: str = "ddqn"
+    """Algorithm: one of ddqn, kddqn, bdqn, farsighter, ob2i, rnd, krnd (discrete actions); naf,
+    knaf, bnaf, farsighter-naf (continuous). farsighter.algorithms is the table."""
+    env: str = "CartPole-v1"
+    """Any Gymnasium id, passed to gymnasium.make unchanged (``module:EnvId`` works)."""
+    seed: int = 1
+    """Seed of the run (networks, exploration, replay sampling, environments)."""
+    total_steps: int = 100_000
+    """Environment steps to train for (summed over vectorised environments)."""
+    run_dir: str = ""
+    """Run directory; empty means runs/<env>__<algo>__s<seed>."""
+    preset: str = "auto"
+    """Preset the defaults came from (auto: atari for Atari ids, continuous for the NAF agents,
+    general otherwise)."""
     resume: bool = False
     """Continue the run in run_dir from its last checkpoint."""
     overwrite: bool = False
@@ -370,9 +518,11 @@ class Config:
     """Steps between SPS/loss rows in TensorBoard."""
     progress: bool = True
     """Show a progress bar (steps, SPS, recent return)."""
-    torch_threads: int = 0
-    """CPU threads for torch (0: torch's default)."""
 
+    runtime: Annotated[RuntimeConfig, tyro.conf.OmitArgPrefixes] = field(
+        default_factory=RuntimeConfig
+    )
+    """How the run is computed: device, precision, the update's fast paths, threads."""
     blr: BLRConfig = field(default_factory=BLRConfig)
     """Bayesian linear regression head (bdqn, farsighter)."""
     adaptive_k: AdaptiveKConfig = field(default_factory=AdaptiveKConfig)
@@ -385,6 +535,59 @@ class Config:
     """Random network distillation bonus (rnd, krnd)."""
     naf: NAFConfig = field(default_factory=NAFConfig)
     """Continuous-action agents (naf, knaf, bnaf, farsighter-naf)."""
+
+    def checks(self) -> list[tuple[bool, str]]:
+        """(holds, what was wrong and what is accepted) for each of the run's own fields; each
+        section checks its own (``checks`` beside its fields), and farsighter.config.checks
+        what depends on the algorithm."""
+        return [
+            (self.k >= 1, f"k must be an integer >= 1 (got {self.k})"),
+            (self.lr > 0, f"lr must be > 0 (got {self.lr})"),
+            (self.buffer_size > 0, f"buffer_size must be > 0 (got {self.buffer_size})"),
+            (self.batch_size > 0, f"batch_size must be > 0 (got {self.batch_size})"),
+            (
+                self.batch_size <= self.buffer_size,
+                f"batch_size ({self.batch_size}) must not exceed buffer_size ({self.buffer_size})",
+            ),
+            (self.total_steps > 0, f"total_steps must be > 0 (got {self.total_steps})"),
+            (self.num_envs >= 1, f"num_envs must be >= 1 (got {self.num_envs})"),
+            (0.0 <= self.gamma <= 1.0, f"gamma must be in [0, 1] (got {self.gamma})"),
+            (self.train_every >= 1, f"train_every must be >= 1 (got {self.train_every})"),
+            (
+                self.target_update_every >= 1,
+                f"target_update_every must be >= 1 (got {self.target_update_every})",
+            ),
+            (
+                self.learning_starts >= 0,
+                f"learning_starts must be >= 0 (got {self.learning_starts})",
+            ),
+            (
+                0.0 <= self.eps_end <= 1.0 and 0.0 <= self.eps_start <= 1.0,
+                "eps_start and eps_end must be in [0, 1]",
+            ),
+            (0.0 <= self.eval_epsilon <= 1.0, "eval_epsilon must be in [0, 1]"),
+            (self.eps_decay_steps >= 0, "eps_decay_steps must be >= 0"),
+            (self.recent_window >= 0, "recent_window must be >= 0 (0 means target_update_every)"),
+            (
+                self.effective_recent_window <= self.buffer_size,
+                f"recent window ({self.effective_recent_window}) must not exceed buffer_size "
+                f"({self.buffer_size})",
+            ),
+            (  # max(.., 1): the list is built whole, so a bad num_envs must not divide by zero here
+                self.k <= self.buffer_size // max(self.num_envs, 1),
+                f"k ({self.k}) must not exceed the per-environment buffer "
+                f"({self.buffer_size // max(self.num_envs, 1)})",
+            ),
+            (all(h > 0 for h in self.hidden_sizes), "hidden_sizes must be positive integers"),
+            (self.eval_episodes >= 1, "eval_episodes must be >= 1"),
+            (
+                self.eval_every >= 0,
+                f"eval_every must be >= 0 (0: no periodic evaluation; got {self.eval_every})",
+            ),
+            (self.eval_max_steps >= 1, f"eval_max_steps must be >= 1 (got {self.eval_max_steps})"),
+            (self.log_every >= 1, f"log_every must be >= 1 (got {self.log_every})"),
+            (self.checkpoint_every >= 0, "checkpoint_every must be >= 0"),
+        ]
 
     @property
     def effective_recent_window(self) -> int:

@@ -8,7 +8,7 @@ import os
 from pathlib import Path
 from typing import Any
 
-from farsighter.config.fields import Config
+from farsighter.config.fields import Config, RuntimeConfig
 from farsighter.errors import ConfigError
 
 # --------------------------------------------------------------------------------------------
@@ -38,6 +38,9 @@ def config_from_dict(data: dict[str, Any]) -> Config:
             kwargs[f.name] = value
         return cls(**kwargs)
 
+    if "runtime" not in data:  # written before the runtime section: its fields at the top
+        runtime = {f.name for f in dataclasses.fields(RuntimeConfig)}
+        data = {**data, "runtime": {k: v for k, v in data.items() if k in runtime}}
     return build(Config, data)
 
 

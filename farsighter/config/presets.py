@@ -6,10 +6,10 @@ from __future__ import annotations
 import dataclasses
 import math
 from dataclasses import dataclass, field
-from typing import Any
+from typing import Any, cast
 
 from farsighter import algorithms
-from farsighter.config.fields import Config
+from farsighter.config.fields import Config, RuntimeConfig
 from farsighter.errors import ConfigError
 
 # --------------------------------------------------------------------------------------------
@@ -341,6 +341,23 @@ PRESETS: dict[str, Preset] = {
 }
 
 
+def with_values(cfg: Config, dotted: dict[str, Any]) -> Config:
+    """``cfg`` with the fields named by dotted keys (``runtime.device``) replaced."""
+    return cast(Config, _nested_replace(cfg, dotted))
+
+
+def flat_fields(obj: Any, prefix: str = "") -> list[tuple[str, Any]]:
+    """(dotted name, value) of every field of a config, nested sections walked, in field order."""
+    rows: list[tuple[str, Any]] = []
+    for f in dataclasses.fields(obj):
+        value = getattr(obj, f.name)
+        if dataclasses.is_dataclass(value):
+            rows += flat_fields(value, f"{prefix}{f.name}.")
+        else:
+            rows.append((prefix + f.name, value))
+    return rows
+
+
 def _nested_replace(obj: Any, dotted: dict[str, Any]) -> Any:
     """``dataclasses.replace`` with dotted keys for nested dataclasses; unknown keys raise."""
     direct: dict[str, Any] = {}
@@ -407,6 +424,14 @@ def config_layers(algo: str, env: str, preset: str = "auto") -> list[tuple[str, 
     return layers
 
 
+RUNTIME_FIELDS = frozenset(f.name for f in dataclasses.fields(RuntimeConfig))
+
+
+def runtime_key(key: str) -> str:
+    """A runtime field's plain name (``device``) as its dotted key (``runtime.device``)."""
+    return f"runtime.{key}" if key in RUNTIME_FIELDS else key
+
+
 def make_config(
     algo: str = "ddqn", env: str = "CartPole-v1", preset: str = "auto", **overrides: Any
 ) -> Config:
@@ -414,12 +439,14 @@ def make_config(
     values for this algorithm) <- ``overrides``.
 
     ``overrides`` use field names; nested fields are written ``blr__prior_std`` or passed in a
-    dict as ``{"blr.prior_std": ...}`` via ``**{"blr.prior_std": 0.1}``.
+    dict as ``{"blr.prior_std": ...}`` via ``**{"blr.prior_std": 0.1}``. The runtime section's
+    fields also go by their plain names (``device="cpu"``, ``torch_threads=1``), as on the
+    command line.
     """
     values: dict[str, Any] = {}
     for _, layer in config_layers(algo, env, preset):
         values.update(layer)
-    values.update({k.replace("__", "."): v for k, v in overrides.items()})
+    values.update({runtime_key(k.replace("__", ".")): v for k, v in overrides.items()})
     values.update({"algo": algo, "env": env, "preset": resolve_preset_name(preset, env, algo)})
     return _nested_replace(Config(), values)
 
@@ -433,16 +460,4 @@ def explain_config(algo: str, env: str, preset: str = "auto") -> list[tuple[str,
         for key in layer:
             source[key] = name
     cfg = make_config(algo, env, preset)
-    rows: list[tuple[str, Any, str]] = []
-
-    def walk(obj: Any, prefix: str) -> None:
-        for f in dataclasses.fields(obj):
-            value = getattr(obj, f.name)
-            if dataclasses.is_dataclass(value):
-                walk(value, f"{prefix}{f.name}.")
-            else:
-                key = prefix + f.name
-                rows.append((key, value, source.get(key, "field default")))
-
-    walk(cfg, "")
-    return rows
+    return [(key, value, source.get(key, "field default")) for key, value in flat_fields(cfg)]

@@ -62,8 +62,8 @@ class StudyConfig:
     preset: str = "auto"  # auto: atari for ALE games, minatar for MinAtar
     device: str = "cpu"  # where every run trains: cpu, cuda or cuda:N (workers share a GPU)
     threads: int = 1  # torch threads of each run
-    precision: str = "fp32"  # Config.precision of every run
-    compile: bool = False  # Config.compile of the agents that support it
+    precision: str = "fp32"  # RuntimeConfig.precision of every run
+    compile: bool = False  # RuntimeConfig.compile of the agents that support it
 
 
 QUICK = StudyConfig(
@@ -98,10 +98,10 @@ class Args(StudyArgs):
     threads: Annotated[int | None, runner.study_flag("N")] = None
     """torch threads of each run (each worker process runs one run at a time)."""
     precision: Annotated[str | None, runner.study_flag("fp32|bf16")] = None
-    """Arithmetic of the torsos (Config.precision): fp32, or bf16 autocast."""
+    """Arithmetic of the torsos (RuntimeConfig.precision): fp32, or bf16 autocast."""
     compile: tyro.conf.FlagCreatePairsOff[bool] = False
-    """torch.compile the updates (Config.compile) of the agents that support it (DDQN, k-DDQN,
-    BDQN, Farsighter); OB2I runs eagerly."""
+    """torch.compile the updates (RuntimeConfig.compile) of the agents that support it (DDQN,
+    k-DDQN, BDQN, Farsighter); OB2I runs eagerly."""
 
 
 def expand_games(names: Sequence[str]) -> tuple[str, ...]:

@@ -94,6 +94,7 @@ from typing import Any, Literal, NoReturn
 
 from farsighter import algorithms
 from farsighter.config import Config, make_config, validate
+from farsighter.config.presets import runtime_key
 from farsighter.errors import ConfigError, FarsighterError
 from farsighter.rundir import slug
 
@@ -504,6 +505,7 @@ def _flatten(raw: Mapping[Any, Any], section: str, source: str, *, lists: bool) 
     for key, value in raw.items():
         if not isinstance(key, str):
             raise SweepError(f"{source}: {section}: keys are field names (got {key!r})")
+        key = runtime_key(key)  # the runtime section's fields go by their plain names too
         if key in groups and isinstance(value, Mapping):
             for sub, sub_value in value.items():
                 out.update(_flatten({f"{key}.{sub}": sub_value}, section, source, lists=lists))
