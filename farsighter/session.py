@@ -151,6 +151,14 @@ class _Running:
     steps: int = 0
 
 
+def eval_step_cap(cfg: Config) -> int:
+    """Most steps of one evaluation episode: ``eval_max_steps`` (27,000 under the Atari protocol),
+    or the run's own length when it is shorter, so that a short run's evaluation costs about as
+    much as its training at most (a barely trained Atari policy that never presses FIRE would
+    otherwise play every episode to the protocol's cap)."""
+    return min(cfg.eval_max_steps, cfg.total_steps)
+
+
 def evaluate_episodes(
     agent: Agent,
     cfg: Config,
@@ -165,7 +173,7 @@ def evaluate_episodes(
     life-loss terminals: :func:`farsighter.envs.make_eval_envs`), run as a batch: up to
     ``len(envs)`` at once with one forward pass over the running ones per step, each environment
     taking the next episode when its own ends (terminated, truncated, or after
-    ``cfg.eval_max_steps`` steps).
+    :func:`eval_step_cap` steps).
 
     Episode ``i`` starts from ``reset(seed=seed + i)`` and draws its eval_epsilon coins (one per
     step, and the random action when it comes up) from its own ``default_rng(seed + i)``; so
@@ -179,6 +187,7 @@ def evaluate_episodes(
     finished episodes, with the steps of the longest running one."""
     if not envs:
         raise ValueError("evaluate_episodes needs at least one environment")
+    cap = eval_step_cap(cfg)
     space = envs[0].action_space
     n_actions = int(space.n) if isinstance(space, gym.spaces.Discrete) else 0
     returns = [0.0] * episodes
@@ -215,7 +224,7 @@ def evaluate_episodes(
                 run.obs, reward, terminated, truncated, info = envs[slot].step(action)
                 run.total += float(reward)
                 run.steps += 1
-                if terminated or truncated or run.steps >= cfg.eval_max_steps:
+                if terminated or truncated or run.steps >= cap:
                     returns[run.episode] = run.total
                     if "is_success" in info:
                         success_of[run.episode] = float(info["is_success"])
@@ -224,7 +233,7 @@ def evaluate_episodes(
                     start(slot)
             if progress and running and time.perf_counter() - shown >= 1.0:
                 longest = max(run.steps for run in running.values())
-                bar.set_postfix_str(f"step {longest:,} of at most {cfg.eval_max_steps:,}")
+                bar.set_postfix_str(f"step {longest:,} of at most {cap:,}")
                 shown = time.perf_counter()
     finally:
         bar.close()

@@ -161,3 +161,18 @@ def test_progress_is_shown_only_when_asked(
     assert capsys.readouterr().err == ""
     for env in envs:
         env.close()
+
+
+def test_a_run_shorter_than_the_cap_evaluates_episodes_no_longer_than_itself(
+    trained: dict[str, tuple[Any, Config]],
+) -> None:
+    """A short run's evaluation costs at most about its training: an evaluation episode is capped
+    at min(eval_max_steps, total_steps); a run at least eval_max_steps long keeps that cap."""
+    agent, cfg = trained["CartPole-v1"]
+    episodes, seed = 5, 3
+    long = stepped_alone(agent, dataclasses.replace(cfg, eval_max_steps=500), episodes, seed)
+    assert max(long.returns) > 12  # CartPole pays 1 a step: the trained policy balances longer
+    short = dataclasses.replace(cfg, total_steps=12, eval_max_steps=500)
+    result = batched(agent, short, 3, episodes, seed)
+    assert max(result.returns) == 12 and result.returns == [min(r, 12) for r in long.returns]
+    assert batched(agent, dataclasses.replace(cfg, eval_max_steps=500), 3, episodes, seed) == long
