@@ -17,6 +17,7 @@ from __future__ import annotations
 
 import argparse
 import json
+import shlex
 import shutil
 import subprocess
 import sys
@@ -36,7 +37,7 @@ MAX_FILE = 2 << 20  # bytes: a larger file is not published
 @dataclass(frozen=True)
 class Entry:
     folder: str
-    args: tuple[str, ...]  # the farsighter command after `farsighter`, without --out
+    args: str  # the command after `farsighter`, without --out (split as a shell would)
     note: str
     earlier: int  # seconds it took when made by hand at an earlier commit (docs/results/README)
 
@@ -44,244 +45,89 @@ class Entry:
 ENTRIES = (
     Entry(
         "maze",
-        ("maze", "--agents", "all", "--workers", "2"),
+        "maze --agents all --workers 2",
         "9 agents x 5 seeds x 40k steps on the bridge maze (paper section 5.1); "
         "`farsighter maze --plot-only docs/results/maze` redraws it",
         972,
     ),
     Entry(
         "k-study",
-        ("k-study", "--workers", "2"),
+        "k-study --workers 2",
         "Farsighter at k = 1, 10, 50, 150, 500 and adaptive k on the bridge maze, 5 seeds x 40k "
         "steps (Figure 4)",
         408,
     ),
     Entry(
         "explore",
-        (
-            "explore",
-            "--families",
-            "chain",
-            "--sizes",
-            "5",
-            "10",
-            "20",
-            "30",
-            "--agents",
-            "DDQN",
-            "k-DDQN",
-            "BDQN",
-            "Farsighter",
-            "Farsighter (redraw k)",
-            "Farsighter (redraw episode)",
-            "OB2I",
-            "RND",
-        ),
+        "explore --families chain --sizes 5 10 20 30 --agents DDQN k-DDQN BDQN Farsighter "
+        "'Farsighter (redraw k)' 'Farsighter (redraw episode)' OB2I RND",
         "the chain family, 8 agents x 4 lengths x 5 seeds",
         802,
     ),
     Entry(
         "explore/chain30",
-        (
-            "explore",
-            "--families",
-            "chain",
-            "--sizes",
-            "30",
-            "--seeds",
-            "1",
-            "2",
-            "3",
-            "4",
-            "5",
-            "--agents",
-            "Farsighter",
-        ),
+        "explore --families chain --sizes 30 --seeds 1 2 3 4 5 --agents Farsighter",
         "chain of length 30, the defaults, 5 seeds",
         227,
     ),
     Entry(
         "explore/deepsea",
-        (
-            "explore",
-            "--families",
-            "deepsea",
-            "--sizes",
-            "6",
-            "8",
-            "10",
-            "12",
-            "--seeds",
-            "1",
-            "2",
-            "3",
-            "--agents",
-            "DDQN",
-            "Farsighter",
-            "Farsighter (redraw revisit)",
-        ),
+        "explore --families deepsea --sizes 6 8 10 12 --seeds 1 2 3 --agents DDQN Farsighter "
+        "'Farsighter (redraw revisit)'",
         "bsuite's deep sea, N = 6 to 12, 3 seeds",
         1722,
     ),
     Entry(
         "explore/deepsea-large",
-        (
-            "explore",
-            "--families",
-            "deepsea",
-            "--sizes",
-            "14",
-            "17",
-            "20",
-            "--seeds",
-            "1",
-            "2",
-            "3",
-            "--agents",
-            "Farsighter",
-        ),
+        "explore --families deepsea --sizes 14 17 20 --seeds 1 2 3 --agents Farsighter",
         "deep sea N = 14, 17, 20, Farsighter, 3 seeds",
         1505,
     ),
     Entry(
         "explore/deepsea-stochastic",
-        (
-            "explore",
-            "--families",
-            "deepsea-stochastic",
-            "--sizes",
-            "6",
-            "10",
-            "--seeds",
-            "1",
-            "2",
-            "3",
-            "--agents",
-            "Farsighter",
-            "Farsighter (k-step target)",
-        ),
+        "explore --families deepsea-stochastic --sizes 6 10 --seeds 1 2 3 --agents Farsighter "
+        "'Farsighter (k-step target)'",
         "stochastic deep sea: k_target max against the plain k-step target",
         174,
     ),
     Entry(
         "explore/doorkey",
-        (
-            "explore",
-            "--families",
-            "doorkey",
-            "--sizes",
-            "5",
-            "--seeds",
-            "1",
-            "2",
-            "3",
-            "--agents",
-            "DDQN",
-            "Farsighter",
-            "Farsighter (redraw revisit)",
-        ),
+        "explore --families doorkey --sizes 5 --seeds 1 2 3 --agents DDQN Farsighter "
+        "'Farsighter (redraw revisit)'",
         "MiniGrid DoorKey-5x5, 3 seeds x 100k steps",
         517,
     ),
     Entry(
         "minatar",
-        (
-            "atari",
-            "--games",
-            "minatar",
-            "--agents",
-            "DDQN",
-            "BDQN",
-            "Farsighter",
-            "--seeds",
-            "1",
-            "2",
-            "--steps",
-            "50000",
-            "--eval-every",
-            "10000",
-            "--eval-episodes",
-            "10",
-        ),
+        "atari --games minatar --agents DDQN BDQN Farsighter --seeds 1 2 --steps 50000 "
+        "--eval-every 10000 --eval-episodes 10",
         "3 agents x 5 MinAtar games x 2 seeds x 50k steps",
         3415,
     ),
     Entry(
         "atari100k",
-        (
-            "atari",
-            "--games",
-            "Boxing",
-            "Freeway",
-            "--agents",
-            "Farsighter",
-            "--seeds",
-            "1",
-            "--steps",
-            "100000",
-            "--preset",
-            "atari100k",
-            "--eval-every",
-            "25000",
-            "--eval-episodes",
-            "5",
-        ),
+        "atari --games Boxing Freeway --agents Farsighter --seeds 1 --steps 100000 "
+        "--preset atari100k --eval-every 25000 --eval-episodes 5",
         "Atari-100k, 2 games, 1 seed",
         2796,
     ),
     Entry(
         "walker2d",
-        (
-            "robotics",
-            "--env",
-            "Walker2d-v5",
-            "--steps",
-            "30000",
-            "--seeds",
-            "1",
-            "2",
-            "3",
-            "--workers",
-            "2",
-        ),
+        "robotics --env Walker2d-v5 --steps 30000 --seeds 1 2 3 --workers 2",
         "the four continuous agents on Walker2d-v5 at a small budget",
         583,
     ),
     Entry(
         "fetchpickandplace",
-        (
-            "robotics",
-            "--env",
-            "FetchPickAndPlace-v4",
-            "--seeds",
-            "1",
-            "2",
-            "--steps",
-            "15000",
-            "--eval-every",
-            "1500",
-            "--eval-episodes",
-            "10",
-        ),
+        "robotics --env FetchPickAndPlace-v4 --seeds 1 2 --steps 15000 --eval-every 1500 "
+        "--eval-episodes 10",
         "goal task with HER, a tiny fraction of the paper's budget",
         253,
     ),
     Entry(
         "handmanipulateblock",
-        (
-            "robotics",
-            "--env",
-            "HandManipulateBlock-v1",
-            "--seeds",
-            "1",
-            "2",
-            "--steps",
-            "5000",
-            "--eval-every",
-            "1000",
-            "--eval-episodes",
-            "5",
-        ),
+        "robotics --env HandManipulateBlock-v1 --seeds 1 2 --steps 5000 --eval-every 1000 "
+        "--eval-episodes 5",
         "goal task with HER, a tiny fraction of the paper's budget",
         122,
     ),
@@ -310,7 +156,7 @@ def publish(build: Path, dest: Path) -> None:
 def readme_table(times: dict[str, float]) -> str:
     rows = ["| folder | command | wall time |", "|---|---|---|"]
     for e in ENTRIES:
-        command = "farsighter " + " ".join(f"'{a}'" if " " in a else a for a in e.args)
+        command = f"farsighter {e.args}"
         took = (
             f"{times[e.folder]:.0f} s"
             if e.folder in times
@@ -347,8 +193,8 @@ def main() -> int:
         if args.only is not None and e.folder not in args.only:
             continue
         build = BUILD / e.folder
-        cmd = [sys.executable, "-m", "farsighter", *e.args, "--out", str(build)]
-        print("$ farsighter " + " ".join(e.args) + f" --out {build}", flush=True)
+        cmd = [sys.executable, "-m", "farsighter", *shlex.split(e.args), "--out", str(build)]
+        print(f"$ farsighter {e.args} --out {build}", flush=True)
         spent = build / "wall_seconds.txt"  # over every call that ran part of it
         before = float(spent.read_text()) if spent.exists() else 0.0
         start = time.perf_counter()

@@ -170,7 +170,8 @@ def test_every_command_of_the_results_script_parses_and_checks() -> None:
     folders = [e.folder for e in script.ENTRIES]
     assert len(set(folders)) == len(folders)
     for entry in script.ENTRIES:
-        study = studies[entry.args[0]]
-        settings = settings_from(study, parse(study, list(entry.args[1:])))
+        command, *args = shlex.split(entry.args)
+        settings = settings_from(studies[command], parse(studies[command], args))
+        study = studies[command]
         check(study, settings)
         assert (ROOT / "docs/results" / entry.folder).is_dir(), entry.folder
