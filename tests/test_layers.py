@@ -79,3 +79,20 @@ def test_no_function_of_the_package_is_over_80_lines() -> None:
                 if length > 80:
                     long.append(f"{file.relative_to(ROOT)}:{node.lineno} {node.name} ({length})")
     assert long == []
+
+
+FAST_PATH = ("wrap_step", "GraphedStep", "graphs_enabled", "set_capturable", "torch.compile")
+"""What belongs to the learner (farsighter/agents/learner.py), not to an agent's file."""
+
+
+def test_agent_files_hold_their_math_only() -> None:
+    """An agent is its networks and its loss: no agent file over 300 lines, and none building
+    the fast path (CUDA graph, compile) or a target cache itself."""
+    shared = {"__init__.py", "common.py", "cuda_graph.py", "learner.py", "protocol.py"}
+    agents = sorted(p for p in (ROOT / "agents").glob("*.py") if p.name not in shared)
+    assert len(agents) >= 7
+    for path in agents:
+        text = path.read_text()
+        assert len(text.splitlines()) <= 300, f"{path.name}: {len(text.splitlines())} lines"
+        for name in (*FAST_PATH, "TargetCache("):
+            assert name not in text, f"{path.name} uses {name}"
