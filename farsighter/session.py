@@ -152,11 +152,14 @@ class _Running:
 
 
 def eval_step_cap(cfg: Config) -> int:
-    """Most steps of one evaluation episode: ``eval_max_steps`` (27,000 under the Atari protocol),
-    or the run's own length when it is shorter, so that a short run's evaluation costs about as
-    much as its training at most (a barely trained Atari policy that never presses FIRE would
-    otherwise play every episode to the protocol's cap)."""
-    return min(cfg.eval_max_steps, cfg.total_steps)
+    """Most steps of one evaluation episode: ``eval_max_steps`` (27,000 under the Atari protocol)
+    for a run at least that long. A shorter run is no protocol run, and its evaluations play at
+    most as many steps as it trains: each episode is capped at total_steps // eval_episodes
+    (a barely trained Atari policy that never presses FIRE would otherwise play every episode
+    to the protocol's cap, minutes for a run of seconds)."""
+    if cfg.total_steps >= cfg.eval_max_steps:
+        return cfg.eval_max_steps
+    return max(1, cfg.total_steps // cfg.eval_episodes)
 
 
 def evaluate_episodes(

@@ -163,16 +163,17 @@ def test_progress_is_shown_only_when_asked(
         env.close()
 
 
-def test_a_run_shorter_than_the_cap_evaluates_episodes_no_longer_than_itself(
+def test_a_run_shorter_than_the_cap_evaluates_at_most_as_many_steps_as_it_trains(
     trained: dict[str, tuple[Any, Config]],
 ) -> None:
-    """A short run's evaluation costs at most about its training: an evaluation episode is capped
-    at min(eval_max_steps, total_steps); a run at least eval_max_steps long keeps that cap."""
+    """A run shorter than eval_max_steps is no protocol run: its evaluation episodes are capped
+    at total_steps // eval_episodes; a run at least eval_max_steps long keeps the cap."""
     agent, cfg = trained["CartPole-v1"]
     episodes, seed = 5, 3
     long = stepped_alone(agent, dataclasses.replace(cfg, eval_max_steps=500), episodes, seed)
     assert max(long.returns) > 12  # CartPole pays 1 a step: the trained policy balances longer
-    short = dataclasses.replace(cfg, total_steps=12, eval_max_steps=500)
+    short = dataclasses.replace(cfg, total_steps=60, eval_episodes=5, eval_max_steps=500)
     result = batched(agent, short, 3, episodes, seed)
     assert max(result.returns) == 12 and result.returns == [min(r, 12) for r in long.returns]
-    assert batched(agent, dataclasses.replace(cfg, eval_max_steps=500), 3, episodes, seed) == long
+    at_cap = dataclasses.replace(cfg, total_steps=500, eval_episodes=5, eval_max_steps=500)
+    assert batched(agent, at_cap, 3, episodes, seed) == long

@@ -509,8 +509,9 @@ class Config:
     eval_max_steps: int = 27_000
     """Cap on agent steps of one evaluation episode (27,000 = 108,000 frames at frame skip 4).
     ALE ids are also truncated by the emulator at atari.max_frames_per_episode frames, which
-    binds first. A run shorter than the cap evaluates episodes of at most total_steps steps, so
-    that its evaluations cost about as much as its training at most."""
+    binds first. A run shorter than the cap is no protocol run: its evaluation episodes are
+    capped at total_steps // eval_episodes, so that an evaluation plays at most as many steps
+    as the run trains."""
     checkpoint_every: int = 25_000
     """Steps between checkpoints (0: only at the end)."""
     save_replay: bool = True
