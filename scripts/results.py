@@ -150,7 +150,11 @@ def publish(build: Path, dest: Path) -> None:
         if file.stat().st_size > MAX_FILE:
             continue
         (dest / rel).parent.mkdir(parents=True, exist_ok=True)
-        shutil.copy2(file, dest / rel)
+        if file.suffix in (".md", ".json", ".csv"):  # paths as where the files now live
+            text = file.read_text().replace(str(build), dest.relative_to(ROOT).as_posix())
+            (dest / rel).write_text(text)
+        else:
+            shutil.copy2(file, dest / rel)
 
 
 def readme_table(times: dict[str, float]) -> str:
