@@ -57,11 +57,6 @@ RESUMABLE_FIELDS = {
 }
 
 
-def _flat(cfg: Config) -> dict[str, Any]:
-    """Every field of ``cfg`` by its dotted name."""
-    return dict(flat_fields(cfg))
-
-
 def slug(label: str) -> str:
     """A label as a directory name: ``"Farsighter (k=10)"`` -> ``farsighter-k-10``."""
     return "".join(c if c.isalnum() else "-" for c in label.lower()).strip("-").replace("--", "-")
@@ -113,7 +108,7 @@ def prepare_run_dir(cfg: Config) -> Path:
             raise RunDirError(f"cannot resume: {path} holds no run (no {CONFIG_FILE})")
         saved = load_config(path / CONFIG_FILE)
         check_same_run(cfg, saved)
-        before, given = _flat(saved), _flat(cfg)
+        before, given = dict(flat_fields(saved)), dict(flat_fields(cfg))
         diffs = [
             f"{name} (saved {before[name]!r}, given {given[name]!r})"
             for name in given

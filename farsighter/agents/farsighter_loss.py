@@ -97,9 +97,9 @@ class FarsighterLoss:
                 returns_B=inputs["one_returns_B"],
                 bootstrap_B=inputs["one_bootstrap_B"],
             )
-            one_draws = {k[4:]: v for k, v in inputs.items() if k in ONE_STEP_DRAWS}
-            if "w_online_AD" in inputs:
-                one_draws["w_online_AD"] = inputs["w_online_AD"]
+            # the same acting draw; the one-step target's own normals
+            named = (("w_online_AD", "w_online_AD"), ("z_BAD", "one_z_BAD"))
+            one_draws = {k: inputs[key] for k, key in named if key in inputs}
             y_B = torch.maximum(
                 y_B, self.targets(one, one_draws, inputs.get("one_phi_next_target_BD"))
             )
@@ -140,7 +140,3 @@ class FarsighterLoss:
         if self.target.cache is None:
             return {}
         return {prefix + "phi_next_target_BD": self.target(next_obs_B, e_B, next_B)}
-
-
-ONE_STEP_DRAWS = ("one_z_BAD",)
-"""The draws of the one-step target (``k_target = max``), named ``one_`` + the k-step name."""
