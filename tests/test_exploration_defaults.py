@@ -96,6 +96,52 @@ def test_q_noise_has_the_predictive_variance() -> None:
     assert abs(std.pow(4).mean().item() - 3.0) < 0.2
 
 
+def test_target_noise_rows_draw_what_q_noise_draws() -> None:
+    """The targets' noise (blr.target = sample) draws one normal per row and action: its scale
+    is the predictive sd (closed form), and its draws have q_noise's distribution."""
+    phi, a, y = _synthetic(1.0, n=50)
+    head = BLRHead(num_actions=2, dim=5, prior_std=1.0, noise_std=1.0, cov_scale=2.5)
+    head.fit(phi, a, y)
+    x = torch.randn(7, 5)
+    torch.testing.assert_close(head.q_noise_rows(x, torch.ones(7, 2)), head.predictive_var(x).sqrt())
+    torch.testing.assert_close(head.q_noise_rows(x, -torch.ones(7, 2)), -head.predictive_var(x).sqrt())
+    rows = x[:1].expand(40_000, 5)
+    eps = head.noise_eps(40_000, torch.Generator().manual_seed(1))
+    assert eps.shape == (40_000, 2)
+    fast = head.q_noise_rows(rows, eps)
+    full = head.q_noise(rows, generator=torch.Generator().manual_seed(2))
+    torch.testing.assert_close(fast.var(0), full.var(0), rtol=0.05, atol=0.0)
+    assert fast.mean(0).abs().max() < 0.05 * fast.std(0).max()
+    assert abs((fast[:, 0] * fast[:, 1]).mean().item()) < 0.05 * fast.var(0).max().item()
+
+
+def test_sample_target_adds_the_rows_noise(tmp_path: Path) -> None:
+    """Eq. 8's target with blr.target = sample is the mean target with q_noise_rows added to
+    both Q's of s': with all normals zero it is the mean target; with normals it moves by the
+    predictive sd of the target features (a broken scale or sign fails)."""
+    agent = make_agent(tmp_path, **{"blr.target": "sample", "k": 1})
+    loss = agent.loss
+    obs = torch.randn(5, 4)
+    t = farsighter_module.TensorBatch(
+        obs_B=obs,
+        next_obs_B=torch.randn(5, 4),
+        actions_B=torch.zeros(5, dtype=torch.long),
+        returns_B=torch.ones(5),
+        bootstrap_B=torch.full((5,), 0.5),
+    )
+    head = agent.head
+    zero = loss.targets(t, {"eps_BA": torch.zeros(5, 2)})
+    phi_t = loss.torso_target(t.next_obs_B)
+    q_t = phi_t @ loss.target_mean_AD.T
+    a_star = (agent.torso(t.next_obs_B) @ head.mean_AD.T).argmax(1)
+    torch.testing.assert_close(zero, 1 + 0.5 * q_t.gather(1, a_star[:, None])[:, 0])
+    # normals of one: each action's Q of s' (online and target) rises by its predictive sd
+    sd = head.predictive_var(phi_t).sqrt()
+    shifted = loss.targets(t, {"eps_BA": torch.ones(5, 2)})
+    a_up = (agent.torso(t.next_obs_B) @ head.mean_AD.T + sd).argmax(1)
+    torch.testing.assert_close(shifted, 1 + 0.5 * (q_t + sd).gather(1, a_up[:, None])[:, 0])
+
+
 # ------------------------------------------------------------------ the agent
 def make_agent(tmp_path: Path, algo: str = "farsighter", **kw: object) -> FarsighterAgent:
     cfg = tiny(algo, tmp_path, **{"learning_starts": 0, **kw})

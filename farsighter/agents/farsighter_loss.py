@@ -7,7 +7,9 @@ on the double-Q target of k-step returns (section 4.4):
 
 with w the posterior mean (Eq. 8), or the latest acting Thompson draw (``blr.target = thompson``,
 the BDQN authors' code). With ``blr.target = sample`` a posterior draw per row and action,
-sqrt(cov_scale) phi_target(s')^T U_a z, is added to both Q's of s' (optimism that propagates);
+sqrt(cov_scale) phi_target(s')^T U_a z, is added to both Q's of s' (optimism that propagates;
+drawn as sqrt(cov_scale) ||U_a^T phi_target(s')|| eps, the same distribution from one normal per
+row and action: ``BLRHead.q_noise_rows``);
 with ``k_target = max`` the target is the larger of the k-step and the one-step target of the
 same start (both our extensions: ``Config.k_target``, ``BLRConfig.target``).
 
@@ -57,7 +59,7 @@ class FarsighterLoss:
     def targets(
         self, t: TensorBatch, draws: Tensors, phi_next_target: torch.Tensor | None = None
     ) -> torch.Tensor:
-        """y of Eq. 8 with k-step returns; ``draws``: ``w_online_AD`` (thompson) or ``z_BAD``
+        """y of Eq. 8 with k-step returns; ``draws``: ``w_online_AD`` (thompson) or ``eps_BA``
         (sample); ``phi_next_target``: phi_target(s') when the cache gave it."""
         if phi_next_target is None:
             phi_next, phi_next_target = online_and_target(
@@ -68,7 +70,7 @@ class FarsighterLoss:
         q_next_online = phi_next @ draws.get("w_online_AD", self.head.mean_AD).T
         q_next_target = phi_next_target @ self.target_mean_AD.T
         if self.blr.target == "sample":
-            noise_BA = self.head.q_noise(phi_next_target, z_BAD=draws["z_BAD"])
+            noise_BA = self.head.q_noise_rows(phi_next_target, draws["eps_BA"])
             q_next_online = q_next_online + noise_BA
             q_next_target = q_next_target + noise_BA
         return double_q_target(t.returns_B, t.bootstrap_B, q_next_online, q_next_target)
@@ -98,7 +100,7 @@ class FarsighterLoss:
                 bootstrap_B=inputs["one_bootstrap_B"],
             )
             # the same acting draw; the one-step target's own normals
-            named = (("w_online_AD", "w_online_AD"), ("z_BAD", "one_z_BAD"))
+            named = (("w_online_AD", "w_online_AD"), ("eps_BA", "one_eps_BA"))
             one_draws = {k: inputs[key] for k, key in named if key in inputs}
             y_B = torch.maximum(
                 y_B, self.targets(one, one_draws, inputs.get("one_phi_next_target_BD"))
@@ -126,9 +128,9 @@ class FarsighterLoss:
             return {"w_online_AD": acting_draw()}
         if self.blr.target != "sample":
             return {}
-        draws = {"z_BAD": self.head.noise_z(rows, gen)}
+        draws = {"eps_BA": self.head.noise_eps(rows, gen)}
         if one_step:
-            draws["one_z_BAD"] = self.head.noise_z(rows, gen)
+            draws["one_eps_BA"] = self.head.noise_eps(rows, gen)
         return draws
 
     def target_features(

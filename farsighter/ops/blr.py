@@ -478,6 +478,27 @@ class BLRHead:
         blocks = [self._normals(min(step, rows - lo), generator) for lo in range(0, rows, step)]
         return blocks[0] if len(blocks) == 1 else torch.cat(blocks)
 
+    @torch.no_grad()
+    def q_noise_rows(self, phi_BD: torch.Tensor, eps_BA: torch.Tensor) -> torch.Tensor:
+        """``q_noise``'s distribution, drawn from one standard normal per row and action:
+        phi^T U_a z with z ~ N(0, I_d) is N(0, phi^T U_a U_a^T phi), so
+        sqrt(cov_scale) ||U_a^T phi|| eps_a with eps_a ~ N(0, 1) is the same draw, made from A
+        normals a row instead of A d (:meth:`noise_eps` draws them). For draws that are fresh
+        per row only (a target's noise): a draw held over several rows needs its z."""
+        phi_BD = self._phi32(phi_BD)
+        a, d = self.num_actions, self.dim
+        sd_BA = torch.empty(phi_BD.shape[0], a, dtype=torch.float32, device=self.device)
+        step = self._block_rows()
+        for lo in range(0, phi_BD.shape[0], step):
+            phiu_KAD = (phi_BD[lo : lo + step] @ self._sqrt_cov32_DX).view(-1, a, d)
+            torch.linalg.vector_norm(phiu_KAD, dim=-1, out=sd_BA[lo : lo + step])
+        return sd_BA.mul_(eps_BA).mul_(math.sqrt(self.cov_scale))
+
+    def noise_eps(self, rows: int, generator: torch.Generator | None = None) -> torch.Tensor:
+        """The standard normals of :meth:`q_noise_rows`, shape (rows, A)."""
+        shape = (rows, self.num_actions)
+        return torch.randn(shape, generator=generator, device=self.device, dtype=torch.float32)
+
     def _normals(self, rows: int, generator: torch.Generator | None) -> torch.Tensor:
         """One block of standard normals, shape (rows, A, D)."""
         shape = (rows, self.num_actions, self.dim)
