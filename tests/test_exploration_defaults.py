@@ -103,8 +103,12 @@ def test_target_noise_rows_draw_what_q_noise_draws() -> None:
     head = BLRHead(num_actions=2, dim=5, prior_std=1.0, noise_std=1.0, cov_scale=2.5)
     head.fit(phi, a, y)
     x = torch.randn(7, 5)
-    torch.testing.assert_close(head.q_noise_rows(x, torch.ones(7, 2)), head.predictive_var(x).sqrt())
-    torch.testing.assert_close(head.q_noise_rows(x, -torch.ones(7, 2)), -head.predictive_var(x).sqrt())
+    torch.testing.assert_close(
+        head.q_noise_rows(x, torch.ones(7, 2)), head.predictive_var(x).sqrt()
+    )
+    torch.testing.assert_close(
+        head.q_noise_rows(x, -torch.ones(7, 2)), -head.predictive_var(x).sqrt()
+    )
     rows = x[:1].expand(40_000, 5)
     eps = head.noise_eps(40_000, torch.Generator().manual_seed(1))
     assert eps.shape == (40_000, 2)
