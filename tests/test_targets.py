@@ -44,6 +44,29 @@ def test_terminal_on_first_step_and_k1() -> None:
     assert np.allclose(ret1, [7.0, 3.0]) and np.allclose(boot1, [0.0, G])
 
 
+def test_random_windows_match_a_step_by_step_reading() -> None:
+    """Every window length, ends anywhere (terminations, truncations, both, none): returns,
+    steps and bootstrap as one reads them step by step (an end on the window's last step does
+    not shorten it; a termination there still stops the bootstrap)."""
+    rng = np.random.default_rng(0)
+    for k in range(1, 7):
+        r = rng.normal(size=(400, k))
+        term = rng.random((400, k)) < 0.15
+        trunc = rng.random((400, k)) < 0.15
+        ret, n, boot = nstep_returns(r, term, trunc, G)
+        assert n.dtype == np.int64 and ret.dtype == boot.dtype == np.float32
+        for b in range(400):
+            total, steps = 0.0, 0
+            for j in range(k):
+                total += G**j * r[b, j]
+                steps += 1
+                if term[b, j] or trunc[b, j]:
+                    break
+            assert n[b] == steps
+            assert np.isclose(ret[b], total, rtol=1e-6, atol=1e-6)
+            assert boot[b] == np.float32(0.0 if term[b, steps - 1] else G**steps)
+
+
 def test_double_q_target_uses_online_argmax_and_target_value() -> None:
     q_online = torch.tensor([[1.0, 5.0, 2.0], [9.0, 0.0, 1.0]])
     q_target = torch.tensor([[10.0, -1.0, 30.0], [2.0, 50.0, 60.0]])

@@ -291,9 +291,9 @@ class BLRHead:
     ) -> None:
         """Add samples (phi_i, a_i, y_i) to the per-action statistics Phi_a Phi_a^T and Phi_a y_a.
 
-        Existing statistics are first multiplied by ``forgetting``. Samples are grouped by action
-        with one sort, then each action's rows are added with one GEMM per chunk of ``chunk_size``
-        rows (chunking bounds the float64 copy of phi: 8192 x 512 x 8 B = 32 MiB).
+        Existing statistics are first multiplied by ``forgetting``. Each action's rows, in their
+        order in the minibatch, are added with one GEMM per chunk of ``chunk_size`` rows
+        (chunking bounds the float64 copy of phi: 8192 x 512 x 8 B = 32 MiB).
         """
         if phi_ND.dim() != 2 or phi_ND.shape[1] != self.dim:
             raise ValueError(f"phi_ND must have shape (N, {self.dim}), got {tuple(phi_ND.shape)}")
@@ -313,26 +313,24 @@ class BLRHead:
         if n == 0:
             return
         action_N = action_N.to(device=self.device, dtype=torch.long)
-        if int(action_N.min()) < 0 or int(action_N.max()) >= self.num_actions:
+        low, high = (int(v) for v in torch.aminmax(action_N))
+        if low < 0 or high >= self.num_actions:
             raise ValueError(
-                f"actions must lie in [0, {self.num_actions - 1}], got range "
-                f"[{int(action_N.min())}, {int(action_N.max())}]"
+                f"actions must lie in [0, {self.num_actions - 1}], got range [{low}, {high}]"
             )
         phi_ND = phi_ND.detach().to(device=self.device)
         y_N = y_N.detach().to(device=self.device, dtype=self.stats_dtype)
-        order_N = torch.argsort(action_N, stable=True)
-        counts_A = torch.bincount(action_N, minlength=self.num_actions)
-        self.count_A += counts_A.to(self.stats_dtype)
-        start = 0
-        for a, count in enumerate(counts_A.tolist()):
-            for lo in range(start, start + count, chunk_size):
-                idx_C = order_N[lo : min(lo + chunk_size, start + count)]
+        for a in range(low, high + 1):  # each action's rows in their order in the minibatch
+            rows_M = torch.nonzero(action_N == a).squeeze(1)
+            count = rows_M.shape[0]
+            self.count_A[a] += count
+            for lo in range(0, count, chunk_size):
+                idx_C = rows_M[lo : lo + chunk_size]
                 x_CD = phi_ND.index_select(0, idx_C).to(self.stats_dtype)
                 self.phiphiT_ADD[a].addmm_(x_CD.T, x_CD)
                 y_C = y_N.index_select(0, idx_C)
                 self.phiy_AD[a].addmv_(x_CD.T, y_C)
                 self.yy_A[a] += y_C.square().sum()
-            start += count
 
     @torch.no_grad()
     def refresh(self) -> None:

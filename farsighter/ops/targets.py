@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+import functools
+
 import numpy as np
 import torch
 
@@ -21,21 +23,41 @@ def nstep_returns(
     Q(s_{t+n}): gamma^n, or 0 when the episode terminated inside the window (a terminal state gets
     no bootstrap; a time-limit truncation bootstraps from the last state with gamma^n).
     """
-    done_BK = np.logical_or(terminated_BK, truncated_BK)
     b, k = rewards_BK.shape
+    if k == 1:  # one step: the reward itself, bootstrapped unless it terminated
+        terminal_B = np.asarray(terminated_BK)[:, 0]
+        return (
+            rewards_BK[:, 0].astype(np.float32),
+            np.ones(b, dtype=np.int64),
+            np.where(terminal_B, 0.0, gamma).astype(np.float32),
+        )
+    steps_B = window_steps(np.logical_or(terminated_BK, truncated_BK))
     # alive[j]: no episode end among steps 0..j-1, i.e. step j is still part of the window.
-    ended_before_BK = np.zeros((b, k), dtype=bool)
-    if k > 1:
-        ended_before_BK[:, 1:] = np.cumsum(done_BK[:, :-1], axis=1) > 0
-    alive_BK = ~ended_before_BK
-    discounts_K = gamma ** np.arange(k, dtype=np.float64)
-    returns_B = (rewards_BK.astype(np.float64) * discounts_K * alive_BK).sum(axis=1)
-    steps_B = alive_BK.sum(axis=1)
-    last_B = steps_B - 1
-    rows_B = np.arange(b)
-    terminal_B = terminated_BK[rows_B, last_B] & alive_BK[rows_B, last_B]
+    alive_BK = np.arange(k) < steps_B[:, None]
+    returns_B = (rewards_BK.astype(np.float64) * _discounts(gamma, k) * alive_BK).sum(axis=1)
+    terminal_B = terminated_BK[np.arange(b), steps_B - 1]  # the window's last step
     bootstrap_B = np.where(terminal_B, 0.0, gamma ** steps_B.astype(np.float64))
-    return returns_B.astype(np.float32), steps_B.astype(np.int64), bootstrap_B.astype(np.float32)
+    return returns_B.astype(np.float32), steps_B, bootstrap_B.astype(np.float32)
+
+
+def window_steps(done_BK: np.ndarray) -> np.ndarray:
+    """The steps of each window of k transitions that belong to it, (B,) int64: up to and
+    including the first that ends the episode, k if none does (the k-th step's own end does not
+    shorten the window)."""
+    b, k = done_BK.shape
+    if k == 1:
+        return np.ones(b, dtype=np.int64)
+    ends_BK = done_BK[:, :-1]
+    first_B = ends_BK.argmax(axis=1)  # the first end among steps 0..k-2 (0 where none)
+    return np.where(ends_BK[np.arange(b), first_B], first_B + 1, k).astype(np.int64)
+
+
+@functools.lru_cache(maxsize=64)
+def _discounts(gamma: float, k: int) -> np.ndarray:
+    """gamma^j for j < k (cached: read-only)."""
+    out = gamma ** np.arange(k, dtype=np.float64)
+    out.flags.writeable = False
+    return out
 
 
 def double_q_target(

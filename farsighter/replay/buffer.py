@@ -39,7 +39,7 @@ import numpy as np
 import torch
 
 from farsighter.errors import ConfigError
-from farsighter.ops.targets import nstep_returns
+from farsighter.ops.targets import nstep_returns, window_steps
 
 TERMINATED = np.uint8(1)
 TRUNCATED = np.uint8(2)
@@ -273,10 +273,7 @@ class ReplayBuffer:
         flags_BK = self.flags[e_B[:, None], rows_BK % self.capacity]
         written_BK = rows_BK < count_B[:, None]
         done_BK = ((flags_BK & (TERMINATED | TRUNCATED)) != 0) & written_BK
-        ended_before_BK = np.zeros_like(done_BK)
-        if k > 1:
-            ended_before_BK[:, 1:] = np.cumsum(done_BK[:, :-1], axis=1) > 0
-        steps_B = (~ended_before_BK).sum(axis=1)
+        steps_B = window_steps(done_BK)
         valid_B &= start_B + steps_B < count_B  # bootstrap row exists
         return valid_B, steps_B
 
