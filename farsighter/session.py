@@ -404,6 +404,7 @@ class RunLog:
         if passed_multiple(prev_step, step, cfg.eval_every):
             self.evaluate(state, agent)
         if passed_multiple(prev_step, step, cfg.checkpoint_every) and step < cfg.total_steps:
+            self.logger.flush()  # the logs up to the checkpoint are on disk before it is
             save_run(self.path, cfg, state, agent, envs, obs)
 
     def finish(
@@ -420,6 +421,7 @@ class RunLog:
         self.end_of_training()
         if state.evals == 0 or (cfg.eval_every and state.global_step % cfg.eval_every):
             self.evaluate(state, agent)  # always finish with an evaluation
+        self.logger.flush()
         save_run(self.path, cfg, state, agent, envs, obs)
         torch.save(agent.state_dict(include_replay=False), self.path / POLICY_FILE)
         for callback in callbacks:

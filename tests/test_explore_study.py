@@ -98,6 +98,12 @@ def test_tasks_with_the_steps_cap_and_sizes() -> None:
     assert len(full) == 5 + 3 + 3 + 3 + 1 + 1 + 9 + 4
     assert ("MountainCar-v0", 200_000) in full and ("Acrobot-v1", 100_000) in full
     assert full[-1] == (deep_sea_id(20, stochastic=True), 20 * 3_000)
+    # --episodes sets deep sea runs (both families) alone; --steps still caps
+    bsuite_length = StudyConfig(families=("chain", "deepsea"), sizes=(5, 14), episodes=10_000)
+    assert tasks(bsuite_length) == ((chain_id(5), 10_000), (deep_sea_id(14), 140_000))
+    capped = dataclasses.replace(bsuite_length, steps=100_000, families=("deepsea-stochastic",))
+    assert tasks(capped) == ((deep_sea_id(14, stochastic=True), 100_000),)
+    assert "--episodes 10000" in explore.command(dataclasses.asdict(bsuite_length), Path("o"))
     two = StudyConfig(families=("doorkey", "chain"), sizes=(5, 6))
     assert tasks(two) == (
         ("MiniGrid-DoorKey-5x5-v0", 100_000),

@@ -323,6 +323,7 @@ class StudyConfig:
     sizes: tuple[int, ...] = ()  # empty: every size of each family
     seeds: tuple[int, ...] = (1, 2, 3, 4, 5)
     steps: int = 0  # 0: each task's own budget; otherwise a cap on every budget
+    episodes: int = 0  # deep sea runs: 0, episodes_budget(N); otherwise this many episodes
     workers: int = 0  # 0: one per core
     agents: tuple[str, ...] = DEFAULT_AGENTS
 
@@ -338,6 +339,10 @@ class Args(StudyArgs):
 
     steps: Annotated[int | None, runner.study_flag("N")] = None
     """Cap on every task's step budget (0: each task's own budget)."""
+    episodes: Annotated[int | None, runner.study_flag("N")] = None
+    """Deep sea runs (both families) train for N episodes (0: 2^N + 100, at least 1,000 and at
+    most 3,000); bsuite itself runs 10,000, so --episodes 10000 scores bsuite's criterion over
+    bsuite's whole run. --steps still caps."""
     families: Annotated[tuple[str, ...] | None, runner.study_flag("NAME [NAME ...]")] = None
     """Task families: chain, doorkey, keycorridor, multiroom, mountaincar, acrobot, deepsea,
     deepsea-stochastic."""
@@ -353,6 +358,8 @@ def tasks(study: StudyConfig) -> tuple[Task, ...]:
         for size in family.sizes:
             if not study.sizes or size in study.sizes:
                 env, budget = family.task(size)
+                if family.bsuite and study.episodes:  # deep sea: every episode lasts N steps
+                    budget = size * study.episodes
                 out.append((env, min(budget, study.steps) if study.steps else budget))
     return tuple(out)
 
@@ -393,6 +400,10 @@ def _check(study: StudyConfig) -> None:
         raise FarsighterError("--families name a family twice")
     if study.steps < 0:
         raise FarsighterError(f"--steps must be >= 0 (0: each task's budget; got {study.steps})")
+    if study.episodes < 0:
+        raise FarsighterError(
+            f"--episodes must be >= 0 (0: each deep sea size's own; got {study.episodes})"
+        )
     chosen = {s for f in study.families for s in FAMILIES[f].sizes}
     stray = [s for s in study.sizes if s not in chosen]
     if stray:
@@ -1064,7 +1075,7 @@ def command(study: dict[str, Any], out: Path) -> str:
     if dataclasses.replace(settings, workers=0) == QUICK:
         line.append("--quick")
     else:
-        for name in ("families", "sizes", "seeds", "steps", "agents"):
+        for name in ("families", "sizes", "seeds", "steps", "episodes", "agents"):
             value = getattr(settings, name)
             if value != getattr(StudyConfig(), name):
                 values = value if isinstance(value, tuple) else (value,)
