@@ -84,6 +84,13 @@ ENTRIES = (
         1505,
     ),
     Entry(
+        "explore/deepsea-bsuite",
+        "explore --families deepsea --sizes 10 14 20 --seeds 1 2 3 4 5 --agents Farsighter "
+        "--episodes 10000 --workers 2",
+        "deep sea for bsuite's run length (10,000 episodes), the defaults, 5 seeds (issue #25)",
+        2700,
+    ),
+    Entry(
         "explore/deepsea-stochastic",
         "explore --families deepsea-stochastic --sizes 6 10 --seeds 1 2 3 --agents Farsighter "
         "'Farsighter (k-step target)'",
