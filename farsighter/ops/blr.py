@@ -26,6 +26,7 @@ Tensor names carry shape suffixes: N samples, B rows (states / environments), A 
 from __future__ import annotations
 
 import math
+from collections.abc import Iterator
 from typing import Any
 
 import torch
@@ -455,18 +456,10 @@ class BLRHead:
         action, shape (B, A); its variance is ``predictive_var``. ``z_BAD`` gives the standard
         normals (:meth:`noise_z` draws the same ones from the same generator state), so that a
         captured CUDA graph can take them as an input."""
-        phi_BD = self._phi32(phi_BD)
-        a, d = self.num_actions, self.dim
-        noise_BA = torch.empty(phi_BD.shape[0], a, dtype=torch.float32, device=self.device)
-        scale = math.sqrt(self.cov_scale)
-        step = self._block_rows()
-        for lo in range(0, phi_BD.shape[0], step):
-            phiu_KAD = (phi_BD[lo : lo + step] @ self._sqrt_cov32_DX).view(-1, a, d)
-            if z_BAD is None:
-                z_KAD = self._normals(phiu_KAD.shape[0], generator)
-            else:
-                z_KAD = z_BAD[lo : lo + step]
-            noise_BA[lo : lo + step] = scale * (phiu_KAD * z_KAD).sum(-1)
+        noise_BA, scale = self._per_action(phi_BD), math.sqrt(self.cov_scale)
+        for rows, phiu_KAD in self._phi_u_blocks(phi_BD):
+            z_KAD = self._normals(len(phiu_KAD), generator) if z_BAD is None else z_BAD[rows]
+            noise_BA[rows] = scale * (phiu_KAD * z_KAD).sum(-1)
         return noise_BA
 
     def noise_z(self, rows: int, generator: torch.Generator | None = None) -> torch.Tensor:
@@ -483,14 +476,27 @@ class BLRHead:
         sqrt(cov_scale) ||U_a^T phi|| eps_a with eps_a ~ N(0, 1) is the same draw, made from A
         normals a row instead of A d (:meth:`noise_eps` draws them). For draws that are fresh
         per row only (a target's noise): a draw held over several rows needs its z."""
-        phi_BD = self._phi32(phi_BD)
-        a, d = self.num_actions, self.dim
-        sd_BA = torch.empty(phi_BD.shape[0], a, dtype=torch.float32, device=self.device)
-        step = self._block_rows()
-        for lo in range(0, phi_BD.shape[0], step):
-            phiu_KAD = (phi_BD[lo : lo + step] @ self._sqrt_cov32_DX).view(-1, a, d)
-            torch.linalg.vector_norm(phiu_KAD, dim=-1, out=sd_BA[lo : lo + step])
+        sd_BA = self._per_action(phi_BD)
+        for rows, phiu_KAD in self._phi_u_blocks(phi_BD):
+            torch.linalg.vector_norm(phiu_KAD, dim=-1, out=sd_BA[rows])
         return sd_BA.mul_(eps_BA).mul_(math.sqrt(self.cov_scale))
+
+    def _per_action(self, phi_BD: torch.Tensor) -> torch.Tensor:
+        """An uninitialised float32 (B, A) for a value per row and action of ``phi_BD``."""
+        return torch.empty(
+            phi_BD.shape[0], self.num_actions, dtype=torch.float32, device=self.device
+        )
+
+    def _phi_u_blocks(self, phi_BD: torch.Tensor) -> Iterator[tuple[slice, torch.Tensor]]:
+        """phi^T U_a of every row and action, (K, A, D), in row blocks of bounded size, each
+        with the rows it covers."""
+        phi_BD = self._phi32(phi_BD)
+        a, d, step = self.num_actions, self.dim, self._block_rows()
+        for lo in range(0, phi_BD.shape[0], step):
+            yield (
+                slice(lo, lo + step),
+                (phi_BD[lo : lo + step] @ self._sqrt_cov32_DX).view(-1, a, d),
+            )
 
     def noise_eps(self, rows: int, generator: torch.Generator | None = None) -> torch.Tensor:
         """The standard normals of :meth:`q_noise_rows`, shape (rows, A)."""
@@ -526,13 +532,9 @@ class BLRHead:
         Shape (B, A), float32. Costs B * A * D^2; for one action per row use
         ``predictive_var_action``.
         """
-        phi_BD = self._phi32(phi_BD)
-        a, d = self.num_actions, self.dim
-        out_BA = torch.empty(phi_BD.shape[0], a, dtype=torch.float32, device=self.device)
-        step = self._block_rows()
-        for lo in range(0, phi_BD.shape[0], step):
-            phiu_KAD = (phi_BD[lo : lo + step] @ self._sqrt_cov32_DX).view(-1, a, d)
-            out_BA[lo : lo + step] = phiu_KAD.square().sum(-1)
+        out_BA = self._per_action(phi_BD)
+        for rows, phiu_KAD in self._phi_u_blocks(phi_BD):
+            out_BA[rows] = phiu_KAD.square().sum(-1)
         return self.cov_scale * out_BA
 
     @torch.no_grad()
