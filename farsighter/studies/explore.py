@@ -1042,17 +1042,34 @@ _BSUITE_NOTE = (
     "so far number less than 0.9 of the episodes so far (stochastic deep sea: 0.8, and only from "
     "episode 100 on), and *bsuite solved* counts the seeds solved so before episode 2^N + 100, "
     "the seeds that beat dithering. *Median bsuite episode*: that episode, an unsolved seed "
-    "counting as its run's episodes (a lower bound). The budgets are 2^N + 100 episodes, at "
+    "counting as its run's episodes (a lower bound). {budgets} bsuite checks only the episodes it "
+    "logs (1-10, 12, 14, 17, 20, 25, ...); here every episode counts, so an episode can read a "
+    "little earlier. At small N luck passes the criterion: one episode on the diagonal among the "
+    "first 9 brings the fraction below 0.9, which a random policy does with probability about "
+    "9/2^N (0.13 at N = 6, 0.009 at N = 10; bsuite's sweep starts at N = 10)."
+)
+_BSUITE_BUDGETS = (
+    "The budgets are 2^N + 100 episodes, at "
     f"least {DEEP_SEA_MIN_EPISODES:,} and at most {DEEP_SEA_MAX_EPISODES:,}: at N = 6 and 8 the "
     "runs go on past episode 2^N + 100, which changes no bsuite verdict (bsuite itself runs "
     "10,000 episodes at every size and counts a solve only before 2^N + 100) and gives the "
     "greedy criterion time; from N = 12 on a seed must beat dithering within "
-    f"{DEEP_SEA_MAX_EPISODES:,} episodes. bsuite checks only the episodes it logs (1-10, 12, 14, "
-    "17, 20, 25, ...); here every episode counts, so an episode can read a little earlier. At "
-    "small N luck passes the criterion: one episode on the diagonal among the first 9 brings "
-    "the fraction below 0.9, which a random policy does with probability about 9/2^N (0.13 at "
-    "N = 6, 0.009 at N = 10; bsuite's sweep starts at N = 10)."
+    f"{DEEP_SEA_MAX_EPISODES:,} episodes."
 )
+
+
+def _bsuite_note(episodes: int) -> str:
+    """The report's note on bsuite's criterion, with the deep sea budgets of the study
+    (``--episodes``, or each size's own)."""
+    if not episodes:
+        return _BSUITE_NOTE.format(budgets=_BSUITE_BUDGETS)
+    budgets = (
+        f"Every deep sea run here is {episodes:,} episodes (`--episodes`; bsuite itself runs "
+        "10,000 at every size and counts a solve only before 2^N + 100)."
+    )
+    return _BSUITE_NOTE.format(budgets=budgets)
+
+
 _GROWTH_NOTE = (
     "Growth of the median episodes to solve against the size, over the sizes where at least one "
     "seed solved (at least 3 such sizes, else *not enough sizes*): least-squares fits of "
@@ -1226,7 +1243,7 @@ def _write_report(
     lines += [""]
     lines += [f"- {name}: {FAMILIES[name].solved}." for name in families]
     if any(FAMILIES[name].bsuite for name in families):
-        lines += ["", _BSUITE_NOTE]
+        lines += ["", _bsuite_note(int(study.get("episodes", 0)))]
     lines += [
         "",
         "## Table",
