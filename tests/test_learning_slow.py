@@ -28,11 +28,14 @@ def known_failure(reason: str) -> pytest.MarkDecorator:
 # Measured with the cartpole preset's fresh posterior (issue #12; the general preset's
 # incremental refresh every 100 steps, residual-scaled sigma, propagating targets, a draw held per
 # episode): final evaluations 490.0, 392.8, 480.3 at 30k. Before (Table 1's stale posterior),
-# seeds 2 and 3 failed.
+# seeds 2 and 3 failed. Since the targets' noise is drawn as one normal per row and action (the
+# same distribution, other draws; session 16): seeds 1 and 2 pass (seed 2: 500.0), seed 3
+# reached 500.0 at 25k and fell to 28.2 at 30k (evaluations 184.2, 371.2, 199.3, 292.1, 500.0,
+# 28.2), so 2 of 3 pass, as before.
 CARTPOLE_SEEDS = (
     1,
-    pytest.param(2, marks=known_failure("final evaluation 392.8 < 475 at 30k (measured)")),
-    3,
+    2,
+    pytest.param(3, marks=known_failure("final evaluation 28.2 < 475 at 30k (measured)")),
 )
 MAZE_SEEDS = (
     1,
