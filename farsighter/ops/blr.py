@@ -454,20 +454,13 @@ class BLRHead:
     ) -> torch.Tensor:
         """The random part of ``q_sample``: sqrt(cov_scale) phi^T U_a z with a fresh z per row and
         action, shape (B, A); its variance is ``predictive_var``. ``z_BAD`` gives the standard
-        normals (:meth:`noise_z` draws the same ones from the same generator state), so that a
-        captured CUDA graph can take them as an input."""
+        normals instead of drawing them (the closed form is checked so). A target's noise, fresh
+        per row only, is drawn from fewer normals by :meth:`q_noise_rows`."""
         noise_BA, scale = self._per_action(phi_BD), math.sqrt(self.cov_scale)
         for rows, phiu_KAD in self._phi_u_blocks(phi_BD):
             z_KAD = self._normals(len(phiu_KAD), generator) if z_BAD is None else z_BAD[rows]
             noise_BA[rows] = scale * (phiu_KAD * z_KAD).sum(-1)
         return noise_BA
-
-    def noise_z(self, rows: int, generator: torch.Generator | None = None) -> torch.Tensor:
-        """The standard normals ``q_noise`` draws for ``rows`` rows, shape (rows, A, D), drawn block
-        by block as it draws them (the same numbers from the same generator state)."""
-        step = self._block_rows()
-        blocks = [self._normals(min(step, rows - lo), generator) for lo in range(0, rows, step)]
-        return blocks[0] if len(blocks) == 1 else torch.cat(blocks)
 
     @torch.no_grad()
     def q_noise_rows(self, phi_BD: torch.Tensor, eps_BA: torch.Tensor) -> torch.Tensor:
