@@ -1,7 +1,7 @@
 """Several seeds of one config in one process, as one batched computation.
 
 ``farsighter train --seeds 1 2 ... S`` trains S independent runs. Where the agent has a seed-batched
-form (:func:`farsighter.agents.ddqn_seeds.supports`) they train together: one forward pass acts
+form (:data:`BATCHED`: DDQN and k-DDQN, Farsighter and BDQN) they train together: one forward pass acts
 for every seed, one backward pass updates them all, and the loop below steps each seed's own
 environments, replay and run log in turn. Elsewhere the seeds train one after another through
 :func:`farsighter.train.train`. Either way each seed is an ordinary run:
@@ -30,7 +30,7 @@ import numpy as np
 import torch
 from tqdm import tqdm
 
-from farsighter.agents.ddqn_seeds import ALGOS, SeedBatchDDQN, supports
+from farsighter.agents import ddqn_seeds, farsighter_seeds
 from farsighter.config import Config, validate
 from farsighter.envs import check_spaces, make_vector_env
 from farsighter.errors import ConfigError
@@ -40,7 +40,13 @@ from farsighter.runtime import prepare_process
 from farsighter.session import Callback, LoopState, RunLog, final_observations, restore_run
 from farsighter.train import resolve_device, train
 
-__all__ = ["batchable", "seed_configs", "train_seeds"]
+__all__ = ["BATCHED", "batchable", "seed_configs", "train_seeds"]
+
+BATCHED = {
+    **{algo: ddqn_seeds for algo in ddqn_seeds.ALGOS},
+    **{algo: farsighter_seeds for algo in farsighter_seeds.ALGOS},
+}
+"""The algorithms with a seed-batched form -> its module (``supports``, the batch class)."""
 
 
 def seed_configs(cfg: Config, seeds: Sequence[int]) -> list[Config]:
@@ -118,12 +124,12 @@ def _start_point(cfg: Config) -> Any:
 
 
 def _batch_refusal(cfg: Config, device: torch.device) -> str:
-    if cfg.algo not in ALGOS:  # said without building an environment
-        return supports(cfg, None, device)
+    if cfg.algo not in BATCHED:  # said without building an environment
+        return f"{cfg.algo} trains its seeds one at a time (batched: {', '.join(BATCHED)})"
     probe = make_vector_env(cfg, seed=cfg.seed)
     try:
         check_spaces(cfg.algo, probe.single_observation_space, probe.single_action_space)
-        return supports(cfg, probe.single_observation_space, device)
+        return BATCHED[cfg.algo].supports(cfg, probe.single_observation_space, device)
     finally:
         probe.close()
 
@@ -150,7 +156,7 @@ def _train_batch(
     assert isinstance(obs_space, gym.spaces.Box) and isinstance(act_space, gym.spaces.Discrete)
     paths = [prepare_run_dir(c) for c in cfgs]
     prepare_process(cfg.runtime.torch_threads)
-    batch = SeedBatchDDQN(cfgs, obs_space, act_space, device=device)
+    batch = BATCHED[cfg.algo].SeedBatch(cfgs, obs_space, act_space, device=device)
     members = [batch.member(s) for s in range(len(cfgs))]
     runs: list[_Seed] = []
     for c, path, env, member, hooks in zip(cfgs, paths, envs, members, callbacks, strict=True):

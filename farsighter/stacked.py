@@ -137,25 +137,25 @@ def _product(a_SMK: torch.Tensor, b_SKN: torch.Tensor) -> torch.Tensor:
 
 def stackable(net: nn.Module) -> bool:
     """Whether :class:`StackedQNetwork` can stack this network: a QNetwork with an MLP torso in
-    fp32 (the image torsos and bf16 autocast keep their own path)."""
-    return (
-        isinstance(net, QNetwork)
-        and isinstance(net.torso, MLPTorso)
-        and net.torso.precision == "fp32"
-    )
+    fp32, or such a torso alone (the image torsos and bf16 autocast keep their own path)."""
+    torso = net.torso if isinstance(net, QNetwork) else net
+    return isinstance(torso, MLPTorso) and torso.precision == "fp32"
 
 
 class StackedQNetwork(nn.Module):
-    """S QNetworks with MLP torsos, one parameter per layer with a leading seed axis.
+    """S QNetworks with MLP torsos (or S MLP torsos), one parameter per layer with a leading
+    seed axis.
 
-    ``forward(obs_SB...)`` gives Q (S, B, A). Parameters are listed in ``QNetwork.parameters()``'s
-    order (each layer's weight, then its bias; the head last), so an optimizer over them holds, at
-    each index, the state of the same parameter of every seed."""
+    ``forward(obs_SB...)`` gives Q (S, B, A), or the features phi (S, B, D) of stacked torsos
+    (a ReLU after every layer, the last included). Parameters are listed in the networks'
+    ``parameters()`` order (each layer's weight, then its bias; the head last), so an optimizer
+    over them holds, at each index, the state of the same parameter of every seed."""
 
-    def __init__(self, nets: Sequence[QNetwork]) -> None:
+    def __init__(self, nets: Sequence[QNetwork | MLPTorso]) -> None:
         super().__init__()
         if not nets or not all(stackable(net) for net in nets):
-            raise ValueError("StackedQNetwork stacks QNetworks with fp32 MLP torsos")
+            raise ValueError("StackedQNetwork stacks QNetworks with fp32 MLP torsos, or the torsos")
+        self.relu_last = isinstance(nets[0], MLPTorso)  # a torso: features, no linear head
         self.names = [name for name, _ in nets[0].named_parameters()]
         self.weights = nn.ParameterList(
             nn.Parameter(_stacked([dict(net.named_parameters())[name].detach() for net in nets]))
@@ -169,16 +169,19 @@ class StackedQNetwork(nn.Module):
         return self
 
     def forward(self, obs_SB: torch.Tensor, members: slice = slice(None)) -> torch.Tensor:
-        """Q (S, B, A) of each seed on its own rows; ``members`` picks some seeds' networks
-        (``obs_SB`` then holds their rows only)."""
+        """Q (S, B, A) (features (S, B, D) of torsos) of each seed on its own rows; ``members``
+        picks some seeds' networks (``obs_SB`` then holds their rows only)."""
         x = obs_SB.float().flatten(2)
         params = self._params if members == slice(None) else [p[members] for p in self._params]
         layers = [(params[i], params[i + 1]) for i in range(0, len(params), 2)]
         relu = torch.relu if torch.is_grad_enabled() else torch.relu_  # in place: stays aligned
         for weight, bias in layers[:-1]:  # the torso: ReLU after each layer
             x = relu(stacked_linear(x, weight, bias))
-        weight, bias = layers[-1]  # the linear head
-        return stacked_linear(x, weight, bias)
+        weight, bias = layers[-1]  # the linear head, or the torso's last layer
+        x = stacked_linear(x, weight, bias)
+        # features: each seed's slice aligned as a tensor alone (the seeds' own products with
+        # them round as the agent alone's do)
+        return aligned(relu(x)) if self.relu_last else x
 
     def member_state(self, s: int) -> dict[str, torch.Tensor]:
         """Seed ``s``'s weights as its QNetwork's ``state_dict`` (copies)."""
@@ -240,3 +243,24 @@ def load_member_optimizer_state(opt: torch.optim.Optimizer, s: int, member: dict
                 if key not in target:
                     target[key] = torch.zeros_like(params[int(index)])
                 target[key][s].copy_(value)
+
+
+def clip_per_seed(params: Sequence[torch.Tensor], seeds: int, max_norm: float) -> None:
+    """Each seed's gradients clipped by its own total norm, as
+    :func:`farsighter.agents.common.clip_gradients` clips them alone: the norm of each seed's
+    slice of each gradient, their norm per seed, and a factor of 1 (exact) for the seeds under
+    the limit."""
+    grads = [p.grad for p in params if p.grad is not None]
+    if not grads:
+        return
+    S = seeds
+    norms = torch._foreach_norm([g[s] for s in range(S) for g in grads])
+    total_S = torch.stack(
+        [
+            torch.linalg.vector_norm(torch.stack(norms[s * len(grads) : (s + 1) * len(grads)]))
+            for s in range(S)
+        ]
+    )
+    coef_S = max_norm / (total_S + 1e-6)
+    coef_S = torch.where(coef_S < 1.0, coef_S, torch.ones_like(coef_S))
+    torch._foreach_mul_(grads, [coef_S.view(S, *[1] * (g.dim() - 1)) for g in grads])

@@ -12,33 +12,22 @@ import dataclasses
 from pathlib import Path
 from typing import Any
 
+import gymnasium as gym
 import numpy as np
 import pytest
 import torch
 import torch.nn.functional as F
 
+from farsighter.agents import farsighter_seeds
 from farsighter.cli import main
 from farsighter.errors import ConfigError
 from farsighter.replay import ReplayBuffer
 from farsighter.replay.seeds import SeedReplay
-from farsighter.seeds import seed_configs, train_seeds
+from farsighter.seeds import BATCHED, batchable, seed_configs, train_seeds
 from farsighter.stacked import stacked_linear
 from farsighter.train import train
 
 SEEDS = (3, 5, 8)
-
-
-def _same_checkpoints(alone: dict[str, Any], batch: dict[str, Any]) -> None:
-    for net in ("q", "q_target"):
-        assert alone[net].keys() == batch[net].keys()
-        for name in alone[net]:
-            assert torch.equal(alone[net][name], batch[net][name]), (net, name)
-    assert alone["opt"]["state"].keys() == batch["opt"]["state"].keys()
-    for index, entry in alone["opt"]["state"].items():
-        for key, value in entry.items():
-            assert torch.equal(value, batch["opt"]["state"][index][key]), (index, key)
-    assert alone["rng"] == batch["rng"]
-    assert alone["counters"] == batch["counters"]
 
 
 def _files(run: Path) -> dict[str, list[str]]:
@@ -53,21 +42,49 @@ def _files(run: Path) -> dict[str, list[str]]:
 
 
 @pytest.mark.parametrize(
-    ("env", "values"),
+    ("algo", "env", "values"),
     [
-        ("CartPole-v1", {}),
+        ("ddqn", "CartPole-v1", {}),
         # k-step returns, a loss and clipping that bite, the RMSProp of Table 1, two envs a seed
         (
+            "ddqn",
             "CartPole-v1",
             {"k": 3, "loss": "mse", "max_grad_norm": 0.5, "optimizer": "rmsprop", "num_envs": 2},
         ),
-        ("farsighter/DeepSea6-v0", {"batch_size": 24}),
+        ("ddqn", "farsighter/DeepSea6-v0", {"batch_size": 24}),
+        # the defaults: k = 10 with k_target max, the targets' posterior noise, a draw per step
+        ("farsighter", "CartPole-v1", {"preset": "general"}),
+        # held draws redrawn on a revisit, two envs a seed, clipping that bites, k = 3
+        (
+            "farsighter",
+            "farsighter/DeepSea6-v0",
+            {
+                "preset": "general",
+                "k": 3,
+                "num_envs": 2,
+                "max_grad_norm": 0.5,
+                "blr__redraw": "revisit",
+                "batch_size": 24,
+            },
+        ),
+        # the BDQN code's targets: the acting draw's argmax, the max regression target, Huber
+        (
+            "bdqn",
+            "CartPole-v1",
+            {
+                "preset": "general",
+                "blr__target": "thompson",
+                "blr__posterior_target": "max",
+                "loss": "huber",
+            },
+        ),
     ],
 )
 def test_a_seed_in_a_batch_trains_as_it_does_alone(
-    tmp_path: Path, tiny_config: Any, env: str, values: dict[str, Any]
+    tmp_path: Path, tiny_config: Any, algo: str, env: str, values: dict[str, Any]
 ) -> None:
-    cfg = tiny_config("ddqn", tmp_path / "batch", env=env, **values)
+    cfg = tiny_config(algo, tmp_path / "batch", env=env, **values)
+    assert batchable(cfg)
     summaries = train_seeds(seed_configs(cfg, SEEDS))
     assert [s["seed"] for s in summaries] == list(SEEDS)
     for seed in (SEEDS[0], SEEDS[-1]):
@@ -75,12 +92,54 @@ def test_a_seed_in_a_batch_trains_as_it_does_alone(
         train(dataclasses.replace(cfg, seed=seed, run_dir=str(alone_dir)))
         batch_dir = tmp_path / "batch" / f"s{seed}"
         for name in ("policy.pt", "checkpoint.pt"):
-            _same_checkpoints(_agent_state(alone_dir / name), _agent_state(batch_dir / name))
+            _same_states(_agent_state(alone_dir / name), _agent_state(batch_dir / name))
         assert _files(alone_dir) == _files(batch_dir)
     # the seeds are different runs
     first = _agent_state(tmp_path / "batch" / f"s{SEEDS[0]}" / "policy.pt")
     second = _agent_state(tmp_path / "batch" / f"s{SEEDS[1]}" / "policy.pt")
-    assert not torch.equal(first["q"]["head.weight"], second["q"]["head.weight"])
+    net, name = ("q", "head.weight") if algo == "ddqn" else ("torso", "net.0.weight")
+    assert not torch.equal(first[net][name], second[net][name])
+
+
+def _same_states(alone: Any, batch: Any, where: str = "agent") -> None:
+    """Two checkpoints' agent states equal, every tensor, array and value, key for key."""
+    if isinstance(alone, dict):
+        assert alone.keys() == batch.keys(), where
+        for key in alone:
+            _same_states(alone[key], batch[key], f"{where}.{key}")
+    elif isinstance(alone, torch.Tensor):
+        assert torch.equal(alone, batch), where
+    elif isinstance(alone, np.ndarray):
+        assert np.array_equal(alone, batch), where
+    elif isinstance(alone, list | tuple):
+        assert len(alone) == len(batch), where
+        for i, (a, b) in enumerate(zip(alone, batch, strict=True)):
+            _same_states(a, b, f"{where}[{i}]")
+    elif isinstance(alone, float) and np.isnan(alone):
+        assert np.isnan(batch), where
+    else:
+        assert alone == batch, where
+
+
+def test_settings_a_batch_cannot_take_train_alone(tmp_path: Path, tiny_config: Any) -> None:
+    """Farsighter's batch refuses what it does not batch, and the seeds then train in turn."""
+    base = tiny_config("farsighter", tmp_path, preset="general")
+    for values, says in (
+        ({"blr__mode": "batch"}, "blr.mode batch"),
+        ({"adaptive_k__enabled": True}, "adaptive k"),
+        ({"sample_recent": True}, "target cache"),
+    ):
+        cfg = tiny_config("farsighter", tmp_path, preset="general", **values)
+        assert says in farsighter_seeds.supports(cfg, _box(), torch.device("cpu"))
+        assert not batchable(cfg)
+    assert farsighter_seeds.supports(base, _box(), torch.device("cpu")) == ""
+    image = gym.spaces.Box(0, 255, (4, 84, 84), np.uint8)
+    assert "image" in farsighter_seeds.supports(base, image, torch.device("cpu"))
+    assert "ob2i" not in BATCHED and not batchable(tiny_config("ob2i", tmp_path))
+
+
+def _box() -> gym.spaces.Box:
+    return gym.spaces.Box(-1.0, 1.0, (4,), np.float32)
 
 
 def _agent_state(path: Path) -> dict[str, Any]:
@@ -88,12 +147,15 @@ def _agent_state(path: Path) -> dict[str, Any]:
     return state["agent"] if "agent" in state else state
 
 
+@pytest.mark.parametrize(
+    ("algo", "values"), [("ddqn", {"k": 2}), ("farsighter", {"preset": "general", "k": 3})]
+)
 def test_a_batch_killed_midway_resumes_in_a_batch_or_alone(
-    tmp_path: Path, tiny_config: Any
+    tmp_path: Path, tiny_config: Any, algo: str, values: dict[str, Any]
 ) -> None:
     """Stopped at 1,000 of 1,500 steps (checkpoints every 500): seed 3 resumed alone and seeds 5
     and 8 resumed as a batch end where the uninterrupted batch ends, replay included."""
-    full = tiny_config("ddqn", tmp_path / "full", k=2)
+    full = tiny_config(algo, tmp_path / "full", **values)
     train_seeds(seed_configs(full, SEEDS))
     part = dataclasses.replace(full, run_dir=str(tmp_path / "part"), total_steps=1_000)
     train_seeds(seed_configs(part, SEEDS))
@@ -104,7 +166,7 @@ def test_a_batch_killed_midway_resumes_in_a_batch_or_alone(
     for seed in SEEDS:
         a = torch.load(tmp_path / "full" / f"s{seed}" / "checkpoint.pt", weights_only=False)
         b = torch.load(tmp_path / "part" / f"s{seed}" / "checkpoint.pt", weights_only=False)
-        _same_checkpoints(a["agent"], b["agent"])
+        _same_states(a["agent"], b["agent"])
         for key, value in a["agent"]["replay"].items():
             other = b["agent"]["replay"][key]
             assert value == other if key == "rng" else np.array_equal(value, other), key
@@ -127,7 +189,7 @@ def test_seeds_at_different_steps_resume_in_groups(tmp_path: Path, tiny_config: 
     )
     train_seeds(full)
     for seed in (3, 5):
-        _same_checkpoints(
+        _same_states(
             _agent_state(tmp_path / "full" / f"s{seed}" / "policy.pt"),
             _agent_state(tmp_path / "runs" / f"s{seed}" / "policy.pt"),
         )
@@ -262,4 +324,4 @@ def test_a_study_batches_the_seeds_of_ddqn_and_its_runs_are_those_alone(
         assert (a / "probe.csv").read_text() == (b / "probe.csv").read_text(), run
         assert _files(a) == _files(b), run
         if run.startswith("ddqn"):
-            _same_checkpoints(_agent_state(a / "policy.pt"), _agent_state(b / "policy.pt"))
+            _same_states(_agent_state(a / "policy.pt"), _agent_state(b / "policy.pt"))

@@ -39,6 +39,7 @@ from farsighter.replay import VectorStep
 from farsighter.replay.seeds import SeedReplay
 from farsighter.stacked import (
     StackedQNetwork,
+    clip_per_seed,
     load_member_optimizer_state,
     member_optimizer_state,
 )
@@ -49,8 +50,6 @@ ALGOS = ("ddqn", "kddqn")
 
 def supports(cfg: Config, obs_space: gym.Space | None, device: torch.device) -> str:
     """Why ``cfg`` cannot train as a seed batch here ('' when it can)."""
-    if cfg.algo not in ALGOS:
-        return f"{cfg.algo} trains its seeds one at a time (batched: ddqn, kddqn)"
     if not isinstance(obs_space, gym.spaces.Box) or len(obs_space.shape or ()) == 3:
         return "image observations train their seeds one at a time (batched: flat observations)"
     if cfg.runtime.precision != "fp32" or cfg.runtime.compile or cfg.runtime.cuda_graph == "on":
@@ -125,23 +124,7 @@ class SeedBatchDDQN:
 
     def observe(self, steps: Sequence[VectorStep]) -> None:
         """One vector step of every seed, in seed order, into the seeds' streams."""
-        ended = any(st.final_obs_E is not None for st in steps)
-        self.replay.add(
-            np.concatenate([st.obs_E for st in steps]),
-            np.concatenate([st.action_E for st in steps]),
-            np.concatenate([st.reward_E for st in steps]),
-            np.concatenate([st.terminated_E for st in steps]),
-            np.concatenate([st.truncated_E for st in steps]),
-            [
-                final
-                for st in steps
-                for final in (
-                    st.final_obs_E if st.final_obs_E is not None else [None] * len(st.reward_E)
-                )
-            ]
-            if ended
-            else None,
-        )
+        self.replay.add_steps(steps)
 
     # ------------------------------------------------------------------ learning
     def learn(self, global_step: int) -> list[dict[str, torch.Tensor]]:
@@ -189,27 +172,9 @@ class SeedBatchDDQN:
         # 1/B of the mean applied where F.smooth_l1_loss / F.mse_loss apply it alone.
         loss_SB.mean(1).sum().backward()
         if cfg.max_grad_norm > 0:
-            self._clip(cfg.max_grad_norm)
+            clip_per_seed(self.params, S, cfg.max_grad_norm)
         self.opt.step()
         return loss_SB.detach()
-
-    def _clip(self, max_norm: float) -> None:
-        """Each seed's gradients clipped by its own total norm, as
-        :func:`farsighter.agents.common.clip_gradients` clips them alone: the norm of each
-        seed's slice of each gradient, their norm per seed, and a factor of 1 (exact) for the
-        seeds under the limit."""
-        grads = [p.grad for p in self.params if p.grad is not None]
-        S = self.seeds
-        norms = torch._foreach_norm([g[s] for s in range(S) for g in grads])
-        total_S = torch.stack(
-            [
-                torch.linalg.vector_norm(torch.stack(norms[s * len(grads) : (s + 1) * len(grads)]))
-                for s in range(S)
-            ]
-        )
-        coef_S = max_norm / (total_S + 1e-6)
-        coef_S = torch.where(coef_S < 1.0, coef_S, torch.ones_like(coef_S))
-        torch._foreach_mul_(grads, [coef_S.view(S, *[1] * (g.dim() - 1)) for g in grads])
 
     # ------------------------------------------------------------------ one seed
     def member(self, s: int) -> SeedMember:
@@ -279,3 +244,7 @@ class SeedMember:
             b.replay.load_member(s, state["replay"])
         else:
             b.counters.hold_pending = True
+
+
+SeedBatch = SeedBatchDDQN
+"""The batch class :mod:`farsighter.seeds` builds for this module's algorithms."""

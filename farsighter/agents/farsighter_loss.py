@@ -67,13 +67,9 @@ class FarsighterLoss:
             )
         else:
             phi_next = self.torso(t.next_obs_B)
-        q_next_online = phi_next @ draws.get("w_online_AD", self.head.mean_AD).T
-        q_next_target = phi_next_target @ self.target_mean_AD.T
-        if self.blr.target == "sample":
-            noise_BA = self.head.q_noise_rows(phi_next_target, draws["eps_BA"])
-            q_next_online = q_next_online + noise_BA
-            q_next_target = q_next_target + noise_BA
-        return double_q_target(t.returns_B, t.bootstrap_B, q_next_online, q_next_target)
+        return eq8_targets(
+            self.head, self.target_mean_AD, self.blr.target, t, phi_next, phi_next_target, draws
+        )
 
     @torch.no_grad()
     def posterior_targets(self, t: TensorBatch, draws: Tensors) -> torch.Tensor:
@@ -82,8 +78,7 @@ class FarsighterLoss:
         (``max``, the BDQN code; no draws)."""
         if self.blr.posterior_target == "double":
             return self.targets(t, draws)
-        q_next_target = self.torso_target(t.next_obs_B) @ self.target_mean_AD.T
-        return t.returns_B + t.bootstrap_B * q_next_target.max(dim=1).values
+        return max_targets(t, self.torso_target(t.next_obs_B), self.target_mean_AD)
 
     def __call__(self, inputs: Tensors) -> Tensors:
         """The loss of a minibatch (inputs: :class:`TensorBatch`'s fields, the draws, and with
@@ -92,22 +87,16 @@ class FarsighterLoss:
         t = TensorBatch.of(inputs)
         y_B = self.targets(t, inputs, inputs.get("phi_next_target_BD"))
         if "one_next_obs_B" in inputs:  # k_target = max: same s and a, so only s', r, gamma
-            one = TensorBatch(
-                obs_B=t.obs_B,
-                next_obs_B=inputs["one_next_obs_B"],
-                actions_B=t.actions_B,
-                returns_B=inputs["one_returns_B"],
-                bootstrap_B=inputs["one_bootstrap_B"],
-            )
-            # the same acting draw; the one-step target's own normals
-            named = (("w_online_AD", "w_online_AD"), ("eps_BA", "one_eps_BA"))
-            one_draws = {k: inputs[key] for k, key in named if key in inputs}
             y_B = torch.maximum(
-                y_B, self.targets(one, one_draws, inputs.get("one_phi_next_target_BD"))
+                y_B,
+                self.targets(
+                    one_step_batch(t, inputs),
+                    one_step_draws(inputs),
+                    inputs.get("one_phi_next_target_BD"),
+                ),
             )
         phi_BD = self.torso(t.obs_B)
-        q_B = (phi_BD @ self.head.mean_AD.T).gather(1, t.actions_B[:, None])[:, 0]
-        out = {"loss": td_loss(q_B, y_B, self.kind)}
+        out = {"loss": td_loss(q_taken(phi_BD, self.head.mean_AD, t.actions_B), y_B, self.kind)}
         if self.blr.mode == "incremental":  # the statistics are added outside the step
             double = self.blr.posterior_target == "double"
             out["phi_BD"] = phi_BD.detach()
@@ -121,17 +110,8 @@ class FarsighterLoss:
         gen: torch.Generator,
         acting_draw: Callable[[], torch.Tensor],
     ) -> Tensors:
-        """What the targets of ``rows`` rows draw, in the order the eager targets drew them:
-        the acting draw (``blr.target = thompson``: ``acting_draw()``), or the normals of the
-        k-step target and then of the one-step target (``sample``, from ``gen``)."""
-        if self.blr.target == "thompson":
-            return {"w_online_AD": acting_draw()}
-        if self.blr.target != "sample":
-            return {}
-        draws = {"eps_BA": self.head.noise_eps(rows, gen)}
-        if one_step:
-            draws["one_eps_BA"] = self.head.noise_eps(rows, gen)
-        return draws
+        """:func:`target_draws` of this loss's head and ``blr.target``."""
+        return target_draws(self.blr.target, self.head, rows, one_step, gen, acting_draw)
 
     def target_features(
         self, e_B: np.ndarray, next_B: np.ndarray, next_obs_B: torch.Tensor, prefix: str = ""
@@ -142,3 +122,78 @@ class FarsighterLoss:
         if self.target.cache is None:
             return {}
         return {prefix + "phi_next_target_BD": self.target(next_obs_B, e_B, next_B)}
+
+
+# The math of the loss on given features, shared with the seed-batched agent
+# (farsighter.agents.farsighter_seeds), which computes the features of every seed at once.
+
+
+def eq8_targets(
+    head: BLRHead,
+    target_mean_AD: torch.Tensor,
+    kind: str,
+    t: TensorBatch,
+    phi_next: torch.Tensor,
+    phi_next_target: torch.Tensor,
+    draws: Tensors,
+) -> torch.Tensor:
+    """y of Eq. 8 from the online and target features of s' (``kind``: ``blr.target``): the
+    double-Q target under the posterior mean (or the acting draw ``w_online_AD``), with the
+    per-row posterior noise of ``eps_BA`` added to both Q's for ``sample``."""
+    q_next_online = phi_next @ draws.get("w_online_AD", head.mean_AD).T
+    q_next_target = phi_next_target @ target_mean_AD.T
+    if kind == "sample":
+        noise_BA = head.q_noise_rows(phi_next_target, draws["eps_BA"])
+        q_next_online = q_next_online + noise_BA
+        q_next_target = q_next_target + noise_BA
+    return double_q_target(t.returns_B, t.bootstrap_B, q_next_online, q_next_target)
+
+
+def max_targets(
+    t: TensorBatch, phi_next_target: torch.Tensor, target_mean_AD: torch.Tensor
+) -> torch.Tensor:
+    """y = r^k + gamma^k max_a phi_target(s')^T mean_target_a (the BDQN code's regression)."""
+    return t.returns_B + t.bootstrap_B * (phi_next_target @ target_mean_AD.T).max(dim=1).values
+
+
+def q_taken(phi_BD: torch.Tensor, mean_AD: torch.Tensor, actions_B: torch.Tensor) -> torch.Tensor:
+    """Q(s, a) = phi(s)^T mean_a at the actions taken, (B,)."""
+    return (phi_BD @ mean_AD.T).gather(1, actions_B[:, None])[:, 0]
+
+
+def one_step_batch(t: TensorBatch, inputs: Tensors) -> TensorBatch:
+    """The one-step windows of ``k_target = max`` (the ``one_*`` inputs): the same s and a."""
+    return TensorBatch(
+        obs_B=t.obs_B,
+        next_obs_B=inputs["one_next_obs_B"],
+        actions_B=t.actions_B,
+        returns_B=inputs["one_returns_B"],
+        bootstrap_B=inputs["one_bootstrap_B"],
+    )
+
+
+def one_step_draws(draws: Tensors) -> Tensors:
+    """The one-step target's draws: the same acting draw, its own normals."""
+    named = (("w_online_AD", "w_online_AD"), ("eps_BA", "one_eps_BA"))
+    return {key: draws[src] for key, src in named if src in draws}
+
+
+def target_draws(
+    kind: str,
+    head: BLRHead,
+    rows: int,
+    one_step: bool,
+    gen: torch.Generator,
+    acting_draw: Callable[[], torch.Tensor],
+) -> Tensors:
+    """What the targets of ``rows`` rows draw, in the order the eager targets drew them: the
+    acting draw (``blr.target = thompson``: ``acting_draw()``), or the normals of the k-step
+    target and then of the one-step target (``sample``, from ``gen``)."""
+    if kind == "thompson":
+        return {"w_online_AD": acting_draw()}
+    if kind != "sample":
+        return {}
+    draws = {"eps_BA": head.noise_eps(rows, gen)}
+    if one_step:
+        draws["one_eps_BA"] = head.noise_eps(rows, gen)
+    return draws

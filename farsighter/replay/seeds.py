@@ -16,7 +16,7 @@ from typing import Any
 import numpy as np
 
 from farsighter.errors import ConfigError
-from farsighter.replay.buffer import Batch, ReplayBuffer
+from farsighter.replay.buffer import Batch, ReplayBuffer, VectorStep
 
 _PER_STREAM = ("frames", "actions", "rewards", "flags", "t_ep", "count", "episode_t", "floor")
 
@@ -101,6 +101,26 @@ class SeedReplay(ReplayBuffer):
         e_B = np.concatenate([e for rows in chosen for e, _ in rows])
         start_B = np.concatenate([start for rows in chosen for _, start in rows])
         return self.gather(e_B, start_B, k, gamma, on_device=on_device)
+
+    def add_steps(self, steps: Sequence[VectorStep]) -> None:
+        """One vector step of every seed, in seed order, into the seeds' streams."""
+        ended = any(st.final_obs_E is not None for st in steps)
+        self.add(
+            np.concatenate([st.obs_E for st in steps]),
+            np.concatenate([st.action_E for st in steps]),
+            np.concatenate([st.reward_E for st in steps]),
+            np.concatenate([st.terminated_E for st in steps]),
+            np.concatenate([st.truncated_E for st in steps]),
+            [
+                final
+                for st in steps
+                for final in (
+                    st.final_obs_E if st.final_obs_E is not None else [None] * len(st.reward_E)
+                )
+            ]
+            if ended
+            else None,
+        )
 
     def member_state(self, s: int) -> dict[str, Any]:
         """Seed ``s``'s replay as :meth:`ReplayBuffer.state_dict` of its replay alone."""
