@@ -13,7 +13,12 @@ evaluation and checkpoint excluded: :class:`farsighter.session.RunLog`'s ``loop_
 count for the run alone and the batch. Rounds interleave the entries, so that the machine's drift
 falls on all of them alike.
 
-    python -m benchmarks.seeds_sps [--tasks cartpole deepsea] [--seeds 16] [--rounds 2]
+    python -m benchmarks.seeds_sps [--algo ddqn|farsighter] [--tasks cartpole deepsea]
+        [--seeds 16] [--rounds 2]
+
+``--algo farsighter`` runs Farsighter (the library's defaults: the ``general`` preset, k = 10,
+a draw per step) with the same task settings, batched by
+:class:`farsighter.agents.farsighter_seeds.SeedBatchFarsighter`.
 
 ``--phases`` instead times where a batch step goes (one child per task, 16 seeds, one thread):
 microseconds per batch step in the batch's ``greedy`` forward, the rest of ``act`` (each seed's
@@ -47,12 +52,15 @@ def task_spec(task: str) -> tuple[str, int, dict[str, Any]]:
     return "farsighter/DeepSea20-v0", 10_000, {}
 
 
-def _config(env: str, steps: int, values: dict[str, Any], tmp: str, threads: int) -> Any:
-    """DDQN on ``env`` as every entry runs it: CPU, no evaluation before the final one, quiet."""
+def _config(
+    env: str, steps: int, values: dict[str, Any], tmp: str, threads: int, algo: str = "ddqn"
+) -> Any:
+    """``algo`` on ``env`` as every entry runs it: CPU, no evaluation before the final one,
+    quiet."""
     from farsighter import make_config
 
     return make_config(
-        "ddqn",
+        algo,
         env,
         total_steps=steps,
         run_dir=f"{tmp}/run",
@@ -66,7 +74,7 @@ def _config(env: str, steps: int, values: dict[str, Any], tmp: str, threads: int
 
 
 def run_one(
-    env: str, steps: int, values: dict[str, Any], seeds: int, threads: int
+    env: str, steps: int, values: dict[str, Any], seeds: int, threads: int, algo: str = "ddqn"
 ) -> dict[str, Any]:
     import torch
 
@@ -84,7 +92,7 @@ def run_one(
 
     RunLog.end_of_training = mark_end  # type: ignore[method-assign]
     with tempfile.TemporaryDirectory() as tmp:
-        cfg = _config(env, steps, values, tmp, threads)
+        cfg = _config(env, steps, values, tmp, threads, algo)
         start = time.perf_counter()
         if seeds == 0:
             summaries = [train(dataclasses.replace(cfg, seed=1))]
@@ -92,6 +100,7 @@ def run_one(
             summaries = train_seeds(seed_configs(cfg, list(range(1, seeds + 1))))
     wall = min(ends) - start
     return {
+        "algo": algo,
         "env": env,
         "seeds": max(seeds, 1),
         "alone": seeds == 0,
@@ -107,7 +116,9 @@ def run_one(
 PHASES = ("greedy", "act", "env.step", "observe", "learn", "log.step")
 
 
-def profile_one(env: str, steps: int, values: dict[str, Any], seeds: int) -> dict[str, Any]:
+def profile_one(
+    env: str, steps: int, values: dict[str, Any], seeds: int, algo: str = "ddqn"
+) -> dict[str, Any]:
     """One batch run with timers around its phases (in this process)."""
     from collections import defaultdict
 
@@ -115,15 +126,16 @@ def profile_one(env: str, steps: int, values: dict[str, Any], seeds: int) -> dic
 
     import farsighter.seeds as seeds_module
     from benchmarks.small_profile import phase_timer
-    from farsighter.agents.ddqn_seeds import SeedBatchDDQN
     from farsighter.session import RunLog
 
     torch.set_num_threads(1)
     spent: dict[str, float] = defaultdict(float)
     timed = phase_timer(spent)
 
+    batch_class = seeds_module.BATCHED[algo].SeedBatch
     for name in ("greedy", "act", "observe", "learn"):
-        setattr(SeedBatchDDQN, name, timed(name, getattr(SeedBatchDDQN, name)))
+        if hasattr(batch_class, name):  # Farsighter's act computes its forward itself
+            setattr(batch_class, name, timed(name, getattr(batch_class, name)))
     RunLog.step = timed("log.step", RunLog.step)  # type: ignore[method-assign]
     make_vector_env = seeds_module.make_vector_env
 
@@ -134,17 +146,25 @@ def profile_one(env: str, steps: int, values: dict[str, Any], seeds: int) -> dic
 
     seeds_module.make_vector_env = timed_envs
     with tempfile.TemporaryDirectory() as tmp:
-        cfg = _config(env, steps, values, tmp, 1)
+        cfg = _config(env, steps, values, tmp, 1, algo)
         start = time.perf_counter()
         seeds_module.train_seeds(seeds_module.seed_configs(cfg, list(range(1, seeds + 1))))
         wall = time.perf_counter() - start
     us = {name: round(1e6 * spent[name] / steps, 1) for name in PHASES}
-    us["act"] = round(us["act"] - us["greedy"], 1)  # act's own work: the epsilon draws
+    us["act"] = round(us["act"] - us["greedy"], 1)  # act's own work (DDQN: the epsilon draws)
     us["rest"] = round(1e6 * wall / steps - sum(us.values()), 1)
-    return {"env": env, "seeds": seeds, "steps_per_seed": steps, "us_per_batch_step": us}
+    return {
+        "algo": algo,
+        "env": env,
+        "seeds": seeds,
+        "steps_per_seed": steps,
+        "us_per_batch_step": us,
+    }
 
 
-def measure(task: str, seeds: int, threads: int, phases: bool = False) -> dict[str, Any]:
+def measure(
+    task: str, seeds: int, threads: int, phases: bool = False, algo: str = "ddqn"
+) -> dict[str, Any]:
     from benchmarks.atari_sps import child_env, fail, run_child
 
     env_id, steps, values = task_spec(task)
@@ -156,6 +176,7 @@ def measure(task: str, seeds: int, threads: int, phases: bool = False) -> dict[s
             "seeds": seeds,
             "threads": threads,
             "phases": phases,
+            "algo": algo,
         }
     )
     cmd = [sys.executable, str(Path(__file__).resolve()), "--one", spec]
@@ -169,6 +190,7 @@ def measure(task: str, seeds: int, threads: int, phases: bool = False) -> dict[s
 
 def main() -> None:
     p = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawTextHelpFormatter)
+    p.add_argument("--algo", choices=("ddqn", "farsighter"), default="ddqn")
     p.add_argument("--tasks", nargs="+", choices=TASKS, default=list(TASKS))
     p.add_argument("--seeds", type=int, default=16, help="seeds in the batch")
     p.add_argument("--rounds", type=int, default=2)
@@ -180,9 +202,11 @@ def main() -> None:
         spec = json.loads(args.one)
         values = {k: tuple(v) if isinstance(v, list) else v for k, v in spec["values"].items()}
         if spec.get("phases"):
-            row = profile_one(spec["env"], spec["steps"], values, spec["seeds"])
+            row = profile_one(spec["env"], spec["steps"], values, spec["seeds"], spec["algo"])
         else:
-            row = run_one(spec["env"], spec["steps"], values, spec["seeds"], spec["threads"])
+            row = run_one(
+                spec["env"], spec["steps"], values, spec["seeds"], spec["threads"], spec["algo"]
+            )
         print(TAG + json.dumps(row))
         return
     from benchmarks.common import write_result
@@ -191,7 +215,9 @@ def main() -> None:
         rows = []
         for task in args.tasks:
             print(f"{task}: phases of a {args.seeds}-seed batch step", file=sys.stderr, flush=True)
-            rows.append({**measure(task, args.seeds, 1, phases=True), "task": task})
+            rows.append(
+                {**measure(task, args.seeds, 1, phases=True, algo=args.algo), "task": task}
+            )
             print(f"  {rows[-1]['us_per_batch_step']}", file=sys.stderr, flush=True)
         write_result("seeds_profile" if args.name == "seeds_sps" else args.name, {"runs": rows})
         return
@@ -206,7 +232,9 @@ def main() -> None:
                     file=sys.stderr,
                     flush=True,
                 )
-                runs.append({**measure(task, seeds, threads), "round": round_ + 1})
+                runs.append(
+                    {**measure(task, seeds, threads, algo=args.algo), "round": round_ + 1}
+                )
                 print(f"  {runs[-1]['total_sps']} steps/s", file=sys.stderr, flush=True)
     ratios = {}
     for task in args.tasks:
@@ -220,6 +248,7 @@ def main() -> None:
     write_result(
         args.name,
         {
+            "algo": args.algo,
             "goal": f"{args.seeds} seeds >= {GOAL}x one seed alone",
             "ratio_to_alone": ratios,
             "runs": runs,
