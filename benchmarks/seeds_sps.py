@@ -215,9 +215,7 @@ def main() -> None:
         rows = []
         for task in args.tasks:
             print(f"{task}: phases of a {args.seeds}-seed batch step", file=sys.stderr, flush=True)
-            rows.append(
-                {**measure(task, args.seeds, 1, phases=True, algo=args.algo), "task": task}
-            )
+            rows.append({**measure(task, args.seeds, 1, phases=True, algo=args.algo), "task": task})
             print(f"  {rows[-1]['us_per_batch_step']}", file=sys.stderr, flush=True)
         write_result("seeds_profile" if args.name == "seeds_sps" else args.name, {"runs": rows})
         return
@@ -232,9 +230,7 @@ def main() -> None:
                     file=sys.stderr,
                     flush=True,
                 )
-                runs.append(
-                    {**measure(task, seeds, threads, algo=args.algo), "round": round_ + 1}
-                )
+                runs.append({**measure(task, seeds, threads, algo=args.algo), "round": round_ + 1})
                 print(f"  {runs[-1]['total_sps']} steps/s", file=sys.stderr, flush=True)
     ratios = {}
     for task in args.tasks:

@@ -183,6 +183,18 @@ class StackedQNetwork(nn.Module):
         # them round as the agent alone's do)
         return aligned(relu(x)) if self.relu_last else x
 
+    def member_forward(self, obs_B: torch.Tensor, s: int) -> torch.Tensor:
+        """Seed ``s``'s network alone on ``obs_B`` (B rows): the operations of its QNetwork or
+        MLPTorso (``F.linear`` and ReLU per layer) on its slices of the weights."""
+        x = obs_B.float().flatten(1)
+        params = [p[s] for p in self._params]
+        last = len(params) // 2 - 1
+        for i in range(0, len(params), 2):
+            x = F.linear(x, params[i], params[i + 1])
+            if i // 2 < last or self.relu_last:
+                x = torch.relu(x)
+        return x
+
     def member_state(self, s: int) -> dict[str, torch.Tensor]:
         """Seed ``s``'s weights as its QNetwork's ``state_dict`` (copies)."""
         return {

@@ -67,6 +67,11 @@ def _files(run: Path) -> dict[str, list[str]]:
                 "batch_size": 24,
             },
         ),
+        # Table 1's control column: batch-mode refreshes over each seed's latest tuples, the
+        # recent window, k = 10 (the target cache off: it keys on one replay's rows)
+        ("farsighter", "CartPole-v1", {"runtime__target_cache": "off"}),
+        # BDQN of the control column: a refit from each seed's own replay every 400 steps
+        ("bdqn", "farsighter/DeepSea6-v0", {"blr__posterior_sampling": "uniform"}),
         # the BDQN code's targets: the acting draw's argmax, the max regression target, Huber
         (
             "bdqn",
@@ -125,7 +130,6 @@ def test_settings_a_batch_cannot_take_train_alone(tmp_path: Path, tiny_config: A
     """Farsighter's batch refuses what it does not batch, and the seeds then train in turn."""
     base = tiny_config("farsighter", tmp_path, preset="general")
     for values, says in (
-        ({"blr__mode": "batch"}, "blr.mode batch"),
         ({"adaptive_k__enabled": True}, "adaptive k"),
         ({"sample_recent": True}, "target cache"),
     ):

@@ -23,6 +23,7 @@ Q(s, a) = phi_theta(s)^T w_a with a Bayesian linear regression posterior over ea
 
 from __future__ import annotations
 
+from collections.abc import Callable
 from dataclasses import dataclass
 from typing import Any
 
@@ -34,6 +35,7 @@ from torch import nn
 from farsighter.agents.common import (
     Counters,
     RecentRows,
+    TensorBatch,
     adapt_k,
     batch_tensors,
     build_seeded,
@@ -54,7 +56,7 @@ from farsighter.config import Config
 from farsighter.exploration import ThompsonExploration
 from farsighter.networks import make_torso
 from farsighter.ops.blr import BLRHead, greedy_predictive_variance
-from farsighter.replay import VectorStep
+from farsighter.replay import ReplayBuffer, VectorStep
 
 FEATURE_CHUNK = 4_096  # rows per forward pass when computing features for a posterior refresh
 RECENT_FEATURES = 2_048  # incremental mode: minibatch features kept for adaptive k's Q-variance
@@ -209,57 +211,22 @@ class FarsighterAgent:
         self.head.accumulate(phi_BD * root_w, a_B, y_B * root_w)
         self.recent_phi.add(phi_BD)
 
-    @torch.no_grad()
-    def _features_and_targets(
-        self, e_N: np.ndarray, l_N: np.ndarray
-    ) -> tuple[torch.Tensor, torch.Tensor, torch.Tensor]:
-        """Features of the current theta and Eq. 8 targets of the valid k-step tuples starting at
-        the given rows, gathered chunk by chunk (stacked frames are never all in memory)."""
-        phis, actions, ys = [], [], []
-        for lo in range(0, len(e_N), FEATURE_CHUNK):
-            part = self.replay.sample_indices(
-                e_N[lo : lo + FEATURE_CHUNK],
-                l_N[lo : lo + FEATURE_CHUNK],
-                self.counters.k,
-                self.cfg.gamma,
-                stride=self.counters.k if self.cfg.stride else 1,  # Algorithm 1: one tuple per k
-                on_device=True,  # from the device mirror when the replay keeps one
-            )
-            if len(part.actions) == 0:
-                continue
-            t = batch_tensors(part, self.device)
-            phis.append(self.torso(t.obs_B))
-            actions.append(t.actions_B)
-            double = self.cfg.blr.posterior_target == "double"  # Eq. 8's target draws
-            ys.append(
-                self.loss.posterior_targets(t, self._draws(len(part.actions)) if double else {})
-            )
-        if not phis:
-            empty = torch.zeros(0, device=self.device)
-            return empty, empty.long(), empty
-        return torch.cat(phis), torch.cat(actions), torch.cat(ys)
-
     def refresh_posterior(self) -> None:
-        """Algorithm 1 line 6 (and line 7 with adaptive k)."""
-        cfg = self.cfg
-        if cfg.blr.mode == "batch":
-            d = cfg.blr.posterior_samples
-            if cfg.blr.posterior_sampling == "uniform":  # the BDQN code: whole buffer, replaced
-                e_N, l_N = self.replay.uniform_indices(d, self.rng)
-            else:  # the latest D tuples; with stride one is stored per k steps, so k D rows
-                e_N, l_N = self.replay.recent_indices(d * (self.counters.k if cfg.stride else 1))
-            phi_ND, a_N, y_N = self._features_and_targets(e_N, l_N)
-            if len(a_N) == 0:
-                return
-            self.head.fit(phi_ND, a_N, y_N)  # statistics reset each refresh, as in BDQN's code
-        else:  # the statistics are already up to date: no features are recomputed
-            recent = self.recent_phi.rows()
-            if recent is None:
-                return
-            self.head.refresh()
-            phi_ND = recent
-        self.counters.q_variance = greedy_predictive_variance(self.head, phi_ND)
-        adapt_k(self.counters, self.counters.q_variance, cfg.adaptive_k, self.replay)
+        """Algorithm 1 line 6 (and line 7 with adaptive k): :func:`refresh_posterior`."""
+        double = self.cfg.blr.posterior_target == "double"  # Eq. 8's target draws
+        refresh_posterior(
+            self.cfg,
+            self.head,
+            self.counters,
+            self.recent_phi,
+            self.replay,
+            self.rng,
+            self.device,
+            self.torso,
+            lambda t: self.loss.posterior_targets(
+                t, self._draws(len(t.actions_B)) if double else {}
+            ),
+        )
 
     def diagnostics(self) -> dict[str, float]:
         return {
@@ -294,6 +261,77 @@ class FarsighterAgent:
         # the target cache (cleared by the target's load) is kept when the checkpoint has it
         if self.loss.target.cache is not None:
             self.loss.target.cache.load_state_dict(state.get("target_cache"))
+
+
+def refresh_posterior(
+    cfg: Config,
+    head: BLRHead,
+    counters: FarsighterCounters,
+    recent_phi: RecentRows,
+    replay: ReplayBuffer,
+    rng: np.random.Generator,
+    device: torch.device,
+    torso: Callable[[torch.Tensor], torch.Tensor],
+    targets: Callable[[TensorBatch], torch.Tensor],
+    streams: slice = slice(None),
+) -> None:
+    """Algorithm 1 line 6 (and line 7 with adaptive k) for one posterior: in batch mode a fit
+    on the features (``torso``) and regression targets (``targets``) of D tuples of the replay's
+    ``streams`` (:func:`refresh_rows`); in incremental mode from its running statistics."""
+    if cfg.blr.mode == "batch":
+        d, k = cfg.blr.posterior_samples, counters.k
+        if cfg.blr.posterior_sampling == "uniform":  # the BDQN code: whole buffer, replaced
+            e_N, l_N = replay.uniform_indices(d, rng, streams)
+        else:  # the latest D tuples; with stride one is stored per k steps, so k D rows
+            e_N, l_N = replay.recent_indices(d * (k if cfg.stride else 1), streams)
+        phi_ND, a_N, y_N = refresh_rows(replay, e_N, l_N, cfg, k, device, torso, targets)
+        if len(a_N) == 0:
+            return
+        head.fit(phi_ND, a_N, y_N)  # statistics reset each refresh, as in BDQN's code
+    else:  # the statistics are already up to date: no features are recomputed
+        recent = recent_phi.rows()
+        if recent is None:
+            return
+        head.refresh()
+        phi_ND = recent
+    counters.q_variance = greedy_predictive_variance(head, phi_ND)
+    adapt_k(counters, counters.q_variance, cfg.adaptive_k, replay)
+
+
+@torch.no_grad()
+def refresh_rows(
+    replay: ReplayBuffer,
+    e_N: np.ndarray,
+    l_N: np.ndarray,
+    cfg: Config,
+    k: int,
+    device: torch.device,
+    torso: Callable[[torch.Tensor], torch.Tensor],
+    targets: Callable[[TensorBatch], torch.Tensor],
+) -> tuple[torch.Tensor, torch.Tensor, torch.Tensor]:
+    """Features of the current theta (``torso``) and the regression targets (``targets``) of
+    the valid k-step tuples starting at the given rows of ``replay``: a batch-mode posterior
+    refresh's data, gathered chunk by chunk (stacked frames are never all in memory)."""
+    phis, actions, ys = [], [], []
+    for lo in range(0, len(e_N), FEATURE_CHUNK):
+        part = replay.sample_indices(
+            e_N[lo : lo + FEATURE_CHUNK],
+            l_N[lo : lo + FEATURE_CHUNK],
+            k,
+            cfg.gamma,
+            stride=k if cfg.stride else 1,  # Algorithm 1: one tuple per k
+            on_device=True,  # from the device mirror when the replay keeps one
+        )
+        if len(part.actions) == 0:
+            continue
+        t = batch_tensors(part, device)
+        phis.append(torso(t.obs_B))
+        actions.append(t.actions_B)
+        ys.append(targets(t))
+    if not phis:
+        empty = torch.zeros(0, device=device)
+        return empty, empty.long(), empty
+    return torch.cat(phis), torch.cat(actions), torch.cat(ys)
 
 
 AGENT: AgentFactory = FarsighterAgent  # the class algorithms.py names; mypy checks the protocol

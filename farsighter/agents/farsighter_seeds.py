@@ -42,7 +42,7 @@ from farsighter.agents.common import (
     uses_gpu_replay,
 )
 from farsighter.agents.cuda_graph import Tensors
-from farsighter.agents.farsighter import RECENT_FEATURES, FarsighterCounters
+from farsighter.agents.farsighter import RECENT_FEATURES, FarsighterCounters, refresh_posterior
 from farsighter.agents.farsighter_loss import (
     eq8_targets,
     max_targets,
@@ -54,7 +54,7 @@ from farsighter.agents.learner import make_target_cache
 from farsighter.config import Config
 from farsighter.exploration import ThompsonExploration
 from farsighter.networks import make_torso
-from farsighter.ops.blr import BLRHead, greedy_predictive_variance
+from farsighter.ops.blr import BLRHead
 from farsighter.replay import VectorStep
 from farsighter.replay.seeds import SeedReplay
 from farsighter.stacked import (
@@ -74,8 +74,6 @@ def supports(cfg: Config, obs_space: gym.Space | None, device: torch.device) -> 
         return "image observations train their seeds one at a time (batched: flat observations)"
     if cfg.runtime.precision != "fp32" or cfg.runtime.compile or cfg.runtime.cuda_graph == "on":
         return "precision bf16, compile and cuda_graph train their seeds one at a time"
-    if cfg.blr.mode != "incremental":
-        return "blr.mode batch trains its seeds one at a time (batched: incremental)"
     if cfg.adaptive_k.enabled:
         return "adaptive k trains its seeds one at a time (each seed's k moves on its own)"
     if make_target_cache(cfg, device, 1) is not None:
@@ -204,12 +202,12 @@ class SeedBatchFarsighter:
             if losses is not None:
                 metrics = [{"td_loss": loss} for loss in losses]
         copied = False
-        for p in self.parts:
+        for s, p in enumerate(self.parts):
             c = p.counters
             if global_step >= cfg.learning_starts and crossed(
                 c, "refreshes", global_step, cfg.blr.posterior_every
             ):
-                self._refresh(p)
+                self._refresh(s, p)
             if crossed(c, "target_syncs", global_step, cfg.target_update_every):
                 if not copied:  # every seed's torso at once
                     self.torso_target.load_state_dict(self.torso.state_dict())
@@ -223,8 +221,13 @@ class SeedBatchFarsighter:
         cfg, S, B = self.cfg, self.seeds, self.cfg.batch_size
         k = self.parts[0].counters.k
         try:
-            batch = self.replay.sample_seeds(
-                B, k=k, gamma=cfg.gamma, stride=k if cfg.stride else 1, on_device=True
+            batch = self.replay.sample_seeds(  # sample_minibatch's, seed by seed
+                B,
+                k=k,
+                gamma=cfg.gamma,
+                recent=cfg.effective_recent_window if cfg.sample_recent else None,
+                stride=k if cfg.stride else 1,
+                on_device=True,
             )
         except ValueError:  # not enough complete k-step windows yet
             return None
@@ -266,15 +269,28 @@ class SeedBatchFarsighter:
         if cfg.max_grad_norm > 0:
             clip_per_seed(self.params, S, cfg.max_grad_norm)
         self.opt.step()
-        root_w = (cfg.train_every / B) ** 0.5  # FarsighterAgent._accumulate's weight
-        with torch.no_grad():
-            for s, (p, mine, y_B) in enumerate(zip(self.parts, seeded, ys, strict=True)):
-                phi_BD = phi_SBD[s].detach()
-                if cfg.blr.posterior_target != "double":
-                    y_B = max_targets(_batch(mine), features[""][1][s], p.target_mean_AD)
-                p.head.accumulate(phi_BD * root_w, mine["actions_B"], y_B * root_w)
-                p.recent_phi.add(phi_BD)
+        if cfg.blr.mode == "incremental":
+            self._accumulate(phi_SBD, seeded, ys, features[""][1])
         return [loss.detach() for loss in losses]
+
+    @torch.no_grad()
+    def _accumulate(
+        self,
+        phi_SBD: torch.Tensor,
+        seeded: list[Tensors],
+        ys: list[torch.Tensor],
+        phi_next_target_SBD: torch.Tensor,
+    ) -> None:
+        """Each seed's minibatch into its posterior's statistics (``FarsighterAgent._accumulate``,
+        with the regression targets its loss hands it)."""
+        cfg = self.cfg
+        root_w = (cfg.train_every / cfg.batch_size) ** 0.5
+        for s, (p, mine, y_B) in enumerate(zip(self.parts, seeded, ys, strict=True)):
+            phi_BD = phi_SBD[s].detach()
+            if cfg.blr.posterior_target != "double":
+                y_B = max_targets(_batch(mine), phi_next_target_SBD[s], p.target_mean_AD)
+            p.head.accumulate(phi_BD * root_w, mine["actions_B"], y_B * root_w)
+            p.recent_phi.add(phi_BD)
 
     def _targets(
         self,
@@ -316,13 +332,41 @@ class SeedBatchFarsighter:
                 )
         return y_B
 
-    def _refresh(self, p: _SeedParts) -> None:
-        """Algorithm 1 line 6 for one seed (incremental: its statistics are up to date)."""
-        recent = p.recent_phi.rows()
-        if recent is None:
-            return
-        p.head.refresh()
-        p.counters.q_variance = greedy_predictive_variance(p.head, recent)
+    def _refresh(self, s: int, p: _SeedParts) -> None:
+        """Algorithm 1 line 6 for one seed (``FarsighterAgent.refresh_posterior``): a batch-mode
+        fit runs the seed's own networks over its own streams' rows."""
+        cfg = self.cfg
+        double = cfg.blr.posterior_target == "double"
+
+        def targets(t: TensorBatch) -> torch.Tensor:  # FarsighterLoss.posterior_targets
+            phi_next_target = self.torso_target.member_forward(t.next_obs_B, s)
+            if not double:
+                return max_targets(t, phi_next_target, p.target_mean_AD)
+            draws = target_draws(
+                cfg.blr.target,
+                p.head,
+                len(t.actions_B),
+                False,
+                p.gen,
+                lambda: p.exploration.acting_draw(p.gen),
+            )
+            phi_next = self.torso.member_forward(t.next_obs_B, s)
+            return eq8_targets(
+                p.head, p.target_mean_AD, cfg.blr.target, t, phi_next, phi_next_target, draws
+            )
+
+        refresh_posterior(
+            cfg,
+            p.head,
+            p.counters,
+            p.recent_phi,
+            self.replay,
+            p.rng,
+            self.device,
+            lambda obs: self.torso.member_forward(obs, s),
+            targets,
+            self.replay.seed_streams(s),
+        )
 
     # ------------------------------------------------------------------ one seed
     def member(self, s: int) -> FarsighterSeedMember:
@@ -363,8 +407,7 @@ class FarsighterSeedMember:
     def _phi(self, obs_B: np.ndarray) -> torch.Tensor:
         """phi(s) of this seed's torso, (B, D)."""
         b = self.batch
-        obs = obs_tensor(np.asarray(obs_B), b.device).unsqueeze(0)
-        return b.torso(obs, slice(self.s, self.s + 1))[0]
+        return b.torso.member_forward(obs_tensor(np.asarray(obs_B), b.device), self.s)
 
     def observe(self, step: VectorStep) -> None:
         raise NotImplementedError("a seed of a batch records its steps through the batch")

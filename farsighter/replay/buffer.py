@@ -407,27 +407,32 @@ class ReplayBuffer:
         out = self.mirror[host_to_device(flat_BS, self.mirror.device)]  # (B, S, *frame)
         return out[:, 0] if self.frame_stack == 1 else out
 
-    def recent_indices(self, n: int) -> tuple[np.ndarray, np.ndarray]:
+    def recent_indices(self, n: int, streams: slice = slice(None)) -> tuple[np.ndarray, np.ndarray]:
         """(stream, logical index) of up to ``n`` most recent non-final live rows whose next row
-        exists: the D tuples of a posterior refresh (k-step windows are formed by the caller)."""
+        exists: the D tuples of a posterior refresh (k-step windows are formed by the caller).
+        ``streams``: of these streams only (one seed's, in a seed replay)."""
         es, ls = [], []
-        per = max(1, n // self.num_envs)
+        ids = range(self.num_envs)[streams]
+        per = max(1, n // len(ids))
         low_E = np.maximum(self._low(), self.count - per)
-        for e in range(self.num_envs):
+        for e in ids:
             logical = np.arange(low_E[e], self.count[e], dtype=np.int64)
             es.append(np.full(logical.shape, e, dtype=np.int64))
             ls.append(logical)
         return np.concatenate(es), np.concatenate(ls)
 
-    def uniform_indices(self, n: int, rng: np.random.Generator) -> tuple[np.ndarray, np.ndarray]:
+    def uniform_indices(
+        self, n: int, rng: np.random.Generator, streams: slice = slice(None)
+    ) -> tuple[np.ndarray, np.ndarray]:
         """(stream, logical index) of ``n`` rows drawn uniformly with replacement from every live
-        row (candidates: invalid starts are dropped by :meth:`sample_indices`)."""
-        low_E = self._low()
-        span_E = self.count - low_E
+        row of ``streams`` (candidates: invalid starts are dropped by :meth:`sample_indices`)."""
+        low_E = self._low()[streams]
+        span_E = self.count[streams] - low_E
         if not (span_E > 0).any():
             empty = np.zeros(0, dtype=np.int64)
             return empty, empty.copy()
-        return self._draw_rows(low_E, span_E, n, rng)
+        e_N, l_N = self._draw_rows(low_E, span_E, n, rng)
+        return e_N + range(self.num_envs)[streams].start, l_N
 
     @staticmethod
     def _draw_rows(

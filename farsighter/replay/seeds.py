@@ -48,7 +48,8 @@ class SeedReplay(ReplayBuffer):
     def seeds(self) -> int:
         return len(self.rngs)
 
-    def _streams(self, s: int) -> slice:
+    def seed_streams(self, s: int) -> slice:
+        """The streams of seed ``s``."""
         return slice(s * self.per_seed, (s + 1) * self.per_seed)
 
     def sample_seeds(
@@ -66,7 +67,7 @@ class SeedReplay(ReplayBuffer):
         draws them for that seed alone; the rows of seed 0, then seed 1, ..."""
         E = self.per_seed
         low_all, span_all = self.sample_span(k, recent, E)
-        if not all((span_all[self._streams(s)] > 0).any() for s in range(self.seeds)):
+        if not all((span_all[self.seed_streams(s)] > 0).any() for s in range(self.seeds)):
             raise ValueError("cannot sample from an empty replay buffer")
         chosen: list[list[tuple[np.ndarray, np.ndarray]]] = [[] for _ in range(self.seeds)]
         have = [0] * self.seeds
@@ -76,7 +77,7 @@ class SeedReplay(ReplayBuffer):
                 break
             drawn = []
             for s in pending:  # each seed's candidates from its own generator, as alone
-                streams = self._streams(s)
+                streams = self.seed_streams(s)
                 n_cand = max(2 * (batch_size - have[s]), 8)
                 e_N, l_N = self._draw_rows(
                     low_all[streams], span_all[streams], n_cand, self.rngs[s]
@@ -124,14 +125,14 @@ class SeedReplay(ReplayBuffer):
 
     def member_state(self, s: int) -> dict[str, Any]:
         """Seed ``s``'s replay as :meth:`ReplayBuffer.state_dict` of its replay alone."""
-        streams = self._streams(s)
+        streams = self.seed_streams(s)
         state: dict[str, Any] = {key: getattr(self, key)[streams].copy() for key in _PER_STREAM}
         state["rng"] = self.rngs[s].bit_generator.state
         return state
 
     def load_member(self, s: int, state: dict[str, Any]) -> None:
         """Inverse of :meth:`member_state` (a replay alone's ``state_dict``)."""
-        streams = self._streams(s)
+        streams = self.seed_streams(s)
         for key in _PER_STREAM:
             target = getattr(self, key)[streams]
             src = np.asarray(state[key])
