@@ -11,6 +11,7 @@ import pytest
 import torch
 
 from farsighter.agents.farsighter import FarsighterAgent
+from farsighter.agents.farsighter_posterior import accumulate
 from farsighter.exploration import SCHEDULES
 from farsighter.replay import VectorStep
 from tests.conftest import tiny
@@ -122,7 +123,7 @@ def test_incremental_mode_accumulates_update_minibatches(tmp_path: Path) -> None
     # each row has weight train_every / batch_size, so one env step has unit weight on average
     fresh = make_agent(tmp_path, blr__mode="incremental", train_every=2, batch_size=16)
     phi_BD, a_B, y_B = torch.randn(16, 32), torch.zeros(16, dtype=torch.int64), torch.randn(16)
-    fresh._accumulate(phi_BD, a_B, y_B)
+    accumulate(fresh.cfg, fresh.head, fresh.recent_phi, phi_BD, a_B, y_B)
     w = 2 / 16
     assert torch.allclose(fresh.head.phiphiT_ADD[0].float(), w * phi_BD.T @ phi_BD, atol=1e-5)
     assert torch.allclose(fresh.head.phiy_AD[0].float(), w * phi_BD.T @ y_B, atol=1e-5)

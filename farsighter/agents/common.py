@@ -205,17 +205,22 @@ def clip_gradients(params: list[nn.Parameter], max_norm: float) -> None:
 
 
 def sample_minibatch(replay: ReplayBuffer, cfg: Config, batch_size: int, k: int) -> Batch:
-    """A k-step minibatch as the config asks for it: from the latest N transitions with
-    ``sample_recent``, one window per k steps with ``stride`` (Algorithm 1 literally). Raises
-    ValueError like :meth:`ReplayBuffer.sample` when no complete window is stored yet."""
-    return replay.sample(
-        batch_size,
-        k=k,
-        gamma=cfg.gamma,
-        recent=cfg.effective_recent_window if cfg.sample_recent else None,
-        stride=k if cfg.stride else 1,
-        on_device=True,  # observations from the replay's device mirror when it keeps one
-    )
+    """A k-step minibatch as the config asks for it (:func:`minibatch_args`). Raises ValueError
+    like :meth:`ReplayBuffer.sample` when no complete window is stored yet."""
+    return replay.sample(batch_size, **minibatch_args(cfg, k))
+
+
+def minibatch_args(cfg: Config, k: int) -> dict[str, Any]:
+    """How a config samples its k-step minibatches (a replay alone's ``sample``, or a seed
+    replay's ``sample_seeds``): from the latest N transitions with ``sample_recent``, one
+    window per k steps with ``stride`` (Algorithm 1 literally)."""
+    return {
+        "k": k,
+        "gamma": cfg.gamma,
+        "recent": cfg.effective_recent_window if cfg.sample_recent else None,
+        "stride": k if cfg.stride else 1,
+        "on_device": True,  # observations from the replay's device mirror when it keeps one
+    }
 
 
 class RecentRows:

@@ -12,9 +12,7 @@ writes: a seed started in a batch can be resumed alone, and the other way round.
 
 from __future__ import annotations
 
-import dataclasses
 from collections.abc import Sequence
-from typing import Any
 
 import gymnasium as gym
 import numpy as np
@@ -26,22 +24,19 @@ from farsighter.agents.common import (
     build_seeded,
     elementwise_td_loss,
     make_optimizer,
-    row_bytes,
+    minibatch_args,
     sync_target,
     updates_owed,
-    uses_gpu_replay,
 )
+from farsighter.agents.seed_members import SeedMember, seed_replay, stack_refusal
 from farsighter.config import Config
 from farsighter.exploration.epsilon import epsilon_draws, linear_schedule
 from farsighter.networks import QNetwork
 from farsighter.ops.targets import double_q_target
 from farsighter.replay import VectorStep
-from farsighter.replay.seeds import SeedReplay
 from farsighter.stacked import (
     StackedQNetwork,
     clip_per_seed,
-    load_member_optimizer_state,
-    member_optimizer_state,
 )
 
 ALGOS = ("ddqn", "kddqn")
@@ -50,10 +45,9 @@ ALGOS = ("ddqn", "kddqn")
 
 def supports(cfg: Config, obs_space: gym.Space | None, device: torch.device) -> str:
     """Why ``cfg`` cannot train as a seed batch here ('' when it can)."""
-    if not isinstance(obs_space, gym.spaces.Box) or len(obs_space.shape or ()) == 3:
-        return "image observations train their seeds one at a time (batched: flat observations)"
-    if cfg.runtime.precision != "fp32" or cfg.runtime.compile or cfg.runtime.cuda_graph == "on":
-        return "precision bf16, compile and cuda_graph train their seeds one at a time"
+    refusal = stack_refusal(cfg, obs_space)
+    if refusal:
+        return refusal
     return ""
 
 
@@ -80,17 +74,7 @@ class SeedBatchDDQN:
         self.q_target.requires_grad_(False)
         self.params = list(self.q.parameters())
         self.opt = make_optimizer(self.params, cfg)
-        self.replay = SeedReplay(  # each seed's streams and generator (seed + 1), as alone
-            [c.seed + 1 for c in cfgs],
-            cfg.buffer_size,
-            tuple(obs_space.shape or ()),
-            obs_space.dtype,
-            num_envs=cfg.num_envs,
-            action_dtype=np.int32,
-            device=device
-            if uses_gpu_replay(cfg, device, row_bytes(obs_space, 1) * len(cfgs))
-            else None,
-        )
+        self.replay = seed_replay(cfgs, obs_space, device)
         self.rngs = [np.random.default_rng(c.seed + 2) for c in cfgs]
         self.counters = Counters(k=cfg.k)  # one schedule: the seeds step together
         self.epsilon = cfg.eps_start
@@ -146,14 +130,7 @@ class SeedBatchDDQN:
         """One gradient step of every seed on its own double-Q minibatch; the elementwise TD
         losses, (S, B)."""
         cfg, k, S = self.cfg, self.counters.k, self.seeds
-        batch = self.replay.sample_seeds(
-            cfg.batch_size,
-            k=k,
-            gamma=cfg.gamma,
-            recent=cfg.effective_recent_window if cfg.sample_recent else None,
-            stride=k if cfg.stride else 1,
-            on_device=True,
-        )
+        batch = self.replay.sample_seeds(cfg.batch_size, **minibatch_args(cfg, k))
         t = batch_tensors(batch, self.device)
 
         def by_seed(x: torch.Tensor) -> torch.Tensor:
@@ -179,71 +156,6 @@ class SeedBatchDDQN:
     # ------------------------------------------------------------------ one seed
     def member(self, s: int) -> SeedMember:
         return SeedMember(self, s)
-
-
-class SeedMember:
-    """Seed ``s`` of a batch as an agent: what the run log, evaluation and checkpoints use."""
-
-    def __init__(self, batch: SeedBatchDDQN, s: int) -> None:
-        self.batch, self.s = batch, s
-        self.cfg = batch.cfgs[s]
-
-    def act(self, obs_E: np.ndarray, global_step: int, explore: bool = True) -> np.ndarray:
-        if explore:
-            raise NotImplementedError("a seed of a batch explores through the batch's act")
-        return self.greedy(obs_E)
-
-    def greedy(self, obs_E: np.ndarray) -> np.ndarray:
-        """argmax_a Q(s, a) under this seed's network alone (its slice of the batch's)."""
-        with torch.inference_mode():
-            return self._q(obs_E).argmax(dim=1).cpu().numpy()
-
-    @torch.no_grad()
-    def q_estimate(self, obs_B: np.ndarray) -> tuple[np.ndarray, np.ndarray | None]:
-        return self._q(obs_B).cpu().numpy(), None
-
-    def _q(self, obs_B: np.ndarray) -> torch.Tensor:
-        """Q(s, .) of this seed's network, (B, A)."""
-        b = self.batch
-        obs = torch.as_tensor(np.asarray(obs_B)).to(b.device).unsqueeze(0)
-        return b.q(obs, slice(self.s, self.s + 1))[0]
-
-    def observe(self, step: VectorStep) -> None:
-        raise NotImplementedError("a seed of a batch records its steps through the batch")
-
-    def learn(self, global_step: int) -> dict[str, torch.Tensor]:
-        raise NotImplementedError("a seed of a batch learns through the batch")
-
-    def diagnostics(self) -> dict[str, float]:
-        return {"epsilon": self.batch.epsilon, "k": float(self.batch.counters.k)}
-
-    def state_dict(self, include_replay: bool = True) -> dict[str, Any]:
-        """The checkpoint of ``DDQNAgent`` alone, for this seed."""
-        b, s = self.batch, self.s
-        return {
-            "q": b.q.member_state(s),
-            "q_target": b.q_target.member_state(s),
-            "opt": member_optimizer_state(b.opt, s),
-            "rng": b.rngs[s].bit_generator.state,
-            "counters": dataclasses.asdict(b.counters),
-            "replay": b.replay.member_state(s) if include_replay else None,
-        }
-
-    def load_state_dict(self, state: dict[str, Any]) -> None:
-        """A checkpoint of this seed (written alone or in a batch). Seeds resume together only
-        from checkpoints with the same counters (:func:`farsighter.seeds.train_seeds` groups
-        them so)."""
-        b, s = self.batch, self.s
-        b.q.load_member(s, state["q"])
-        b.q_target.load_member(s, state["q_target"])
-        load_member_optimizer_state(b.opt, s, state["opt"])
-        b.rngs[s].bit_generator.state = state["rng"]
-        for key, value in state["counters"].items():  # equal for every seed of a batch
-            setattr(b.counters, key, value)
-        if state.get("replay") is not None:
-            b.replay.load_member(s, state["replay"])
-        else:
-            b.counters.hold_pending = True
 
 
 SeedBatch = SeedBatchDDQN

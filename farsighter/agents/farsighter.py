@@ -23,8 +23,6 @@ Q(s, a) = phi_theta(s)^T w_a with a Bayesian linear regression posterior over ea
 
 from __future__ import annotations
 
-from collections.abc import Callable
-from dataclasses import dataclass
 from typing import Any
 
 import gymnasium as gym
@@ -33,10 +31,7 @@ import torch
 from torch import nn
 
 from farsighter.agents.common import (
-    Counters,
     RecentRows,
-    TensorBatch,
-    adapt_k,
     batch_tensors,
     build_seeded,
     crossed,
@@ -45,29 +40,23 @@ from farsighter.agents.common import (
     obs_tensor,
     sample_minibatch,
     save_state,
-    to_device,
     updates_owed,
 )
 from farsighter.agents.cuda_graph import Tensors
-from farsighter.agents.farsighter_loss import FarsighterLoss
+from farsighter.agents.farsighter_loss import FarsighterLoss, one_step_inputs
+from farsighter.agents.farsighter_posterior import (
+    RECENT_FEATURES,
+    FarsighterCounters,
+    accumulate,
+    make_head,
+    refresh_posterior,
+)
 from farsighter.agents.learner import Learner, make_target_cache
 from farsighter.agents.protocol import AgentFactory
 from farsighter.config import Config
 from farsighter.exploration import ThompsonExploration
 from farsighter.networks import make_torso
-from farsighter.ops.blr import BLRHead, greedy_predictive_variance
-from farsighter.replay import ReplayBuffer, VectorStep
-
-FEATURE_CHUNK = 4_096  # rows per forward pass when computing features for a posterior refresh
-RECENT_FEATURES = 2_048  # incremental mode: minibatch features kept for adaptive k's Q-variance
-
-
-@dataclass
-class FarsighterCounters(Counters):
-    refreshes: int = 0  # posterior refreshes made (every M steps)
-    draws: int = 0  # Thompson draws made (one per environment and acting step with redraw=step)
-    steps_since_draw: int = 0  # acting steps since the held draw (redraw = every, k)
-    q_variance: float = float("nan")  # at the latest refresh (adaptive k's signal)
+from farsighter.replay import VectorStep
 
 
 class FarsighterAgent:
@@ -94,18 +83,7 @@ class FarsighterAgent:
 
         torso, init_AD = build_seeded(cfg.seed, build)
         self.torso = torso.to(device)
-        b = cfg.blr
-        self.head = BLRHead(
-            num_actions=self.num_actions,
-            dim=self.torso.out_dim,
-            prior_std=b.prior_std,
-            noise_std=b.noise_std,
-            cov_scale=b.cov_scale,
-            forgetting=b.forgetting,
-            scale=b.scale,
-            device=device,
-        )
-        self.head.set_mean(init_AD.to(device))
+        self.head = make_head(cfg, self.num_actions, self.torso.out_dim, init_AD, device)
         # Eq. 8, with the target features of sampled next states kept until the next copy
         cache = make_target_cache(cfg, device, self.torso.out_dim)
         self.loss = FarsighterLoss(self.torso, self.head, cfg, cache)
@@ -175,12 +153,8 @@ class FarsighterAgent:
         if self.cfg.k_target == "max" and self.counters.k > 1:
             # The larger of the k-step and the one-step target of the same start (lower-bound
             # Q-learning, Tang 2020): see Config.k_target. Same s and a, so only s', r, gamma.
-            one = self.replay.gather(batch.env_index, batch.index, 1, self.cfg.gamma)
-            inputs.update(
-                one_next_obs_B=obs_tensor(one.next_obs, self.device),
-                one_returns_B=to_device(one.returns, self.device),
-                one_bootstrap_B=to_device(one.bootstrap, self.device),
-            )
+            one_inputs, one = one_step_inputs(self.replay, batch, self.cfg.gamma, self.device)
+            inputs.update(one_inputs)
             inputs.update(
                 self.loss.target_features(
                     batch.env_index, batch.index + one.steps, inputs["one_next_obs_B"], "one_"
@@ -195,7 +169,14 @@ class FarsighterAgent:
             {**inputs, **self._draws(len(batch.actions), "one_next_obs_B" in inputs)}
         )
         if self.cfg.blr.mode == "incremental":
-            self._accumulate(out["phi_BD"], inputs["actions_B"], out["y_post_B"])
+            accumulate(
+                self.cfg,
+                self.head,
+                self.recent_phi,
+                out["phi_BD"],
+                inputs["actions_B"],
+                out["y_post_B"],
+            )
         return out["loss"]
 
     def _draws(self, rows: int, one_step: bool = False) -> Tensors:
@@ -203,13 +184,6 @@ class FarsighterAgent:
         return self.loss.draws(
             rows, one_step, self.gen, lambda: self.exploration.acting_draw(self.gen)
         )
-
-    def _accumulate(self, phi_BD: torch.Tensor, a_B: torch.Tensor, y_B: torch.Tensor) -> None:
-        """Add a minibatch to the running statistics with weight w = train_every / batch_size
-        (scaling phi and y by sqrt(w) scales Phi Phi^T and Phi y by w)."""
-        root_w = (self.cfg.train_every / self.cfg.batch_size) ** 0.5
-        self.head.accumulate(phi_BD * root_w, a_B, y_B * root_w)
-        self.recent_phi.add(phi_BD)
 
     def refresh_posterior(self) -> None:
         """Algorithm 1 line 6 (and line 7 with adaptive k): :func:`refresh_posterior`."""
@@ -261,77 +235,6 @@ class FarsighterAgent:
         # the target cache (cleared by the target's load) is kept when the checkpoint has it
         if self.loss.target.cache is not None:
             self.loss.target.cache.load_state_dict(state.get("target_cache"))
-
-
-def refresh_posterior(
-    cfg: Config,
-    head: BLRHead,
-    counters: FarsighterCounters,
-    recent_phi: RecentRows,
-    replay: ReplayBuffer,
-    rng: np.random.Generator,
-    device: torch.device,
-    torso: Callable[[torch.Tensor], torch.Tensor],
-    targets: Callable[[TensorBatch], torch.Tensor],
-    streams: slice = slice(None),
-) -> None:
-    """Algorithm 1 line 6 (and line 7 with adaptive k) for one posterior: in batch mode a fit
-    on the features (``torso``) and regression targets (``targets``) of D tuples of the replay's
-    ``streams`` (:func:`refresh_rows`); in incremental mode from its running statistics."""
-    if cfg.blr.mode == "batch":
-        d, k = cfg.blr.posterior_samples, counters.k
-        if cfg.blr.posterior_sampling == "uniform":  # the BDQN code: whole buffer, replaced
-            e_N, l_N = replay.uniform_indices(d, rng, streams)
-        else:  # the latest D tuples; with stride one is stored per k steps, so k D rows
-            e_N, l_N = replay.recent_indices(d * (k if cfg.stride else 1), streams)
-        phi_ND, a_N, y_N = refresh_rows(replay, e_N, l_N, cfg, k, device, torso, targets)
-        if len(a_N) == 0:
-            return
-        head.fit(phi_ND, a_N, y_N)  # statistics reset each refresh, as in BDQN's code
-    else:  # the statistics are already up to date: no features are recomputed
-        recent = recent_phi.rows()
-        if recent is None:
-            return
-        head.refresh()
-        phi_ND = recent
-    counters.q_variance = greedy_predictive_variance(head, phi_ND)
-    adapt_k(counters, counters.q_variance, cfg.adaptive_k, replay)
-
-
-@torch.no_grad()
-def refresh_rows(
-    replay: ReplayBuffer,
-    e_N: np.ndarray,
-    l_N: np.ndarray,
-    cfg: Config,
-    k: int,
-    device: torch.device,
-    torso: Callable[[torch.Tensor], torch.Tensor],
-    targets: Callable[[TensorBatch], torch.Tensor],
-) -> tuple[torch.Tensor, torch.Tensor, torch.Tensor]:
-    """Features of the current theta (``torso``) and the regression targets (``targets``) of
-    the valid k-step tuples starting at the given rows of ``replay``: a batch-mode posterior
-    refresh's data, gathered chunk by chunk (stacked frames are never all in memory)."""
-    phis, actions, ys = [], [], []
-    for lo in range(0, len(e_N), FEATURE_CHUNK):
-        part = replay.sample_indices(
-            e_N[lo : lo + FEATURE_CHUNK],
-            l_N[lo : lo + FEATURE_CHUNK],
-            k,
-            cfg.gamma,
-            stride=k if cfg.stride else 1,  # Algorithm 1: one tuple per k
-            on_device=True,  # from the device mirror when the replay keeps one
-        )
-        if len(part.actions) == 0:
-            continue
-        t = batch_tensors(part, device)
-        phis.append(torso(t.obs_B))
-        actions.append(t.actions_B)
-        ys.append(targets(t))
-    if not phis:
-        empty = torch.zeros(0, device=device)
-        return empty, empty.long(), empty
-    return torch.cat(phis), torch.cat(actions), torch.cat(ys)
 
 
 AGENT: AgentFactory = FarsighterAgent  # the class algorithms.py names; mypy checks the protocol

@@ -27,13 +27,14 @@ from collections.abc import Callable
 import numpy as np
 import torch
 
-from farsighter.agents.common import TensorBatch, td_loss
+from farsighter.agents.common import TensorBatch, obs_tensor, td_loss, to_device
 from farsighter.agents.cuda_graph import Tensors
 from farsighter.agents.learner import CachedTarget
 from farsighter.config import Config
 from farsighter.networks import Torso, online_and_target
 from farsighter.ops.blr import BLRHead
 from farsighter.ops.targets import double_q_target
+from farsighter.replay import Batch, ReplayBuffer
 from farsighter.replay.target_cache import TargetCache
 
 
@@ -170,6 +171,20 @@ def one_step_batch(t: TensorBatch, inputs: Tensors) -> TensorBatch:
         returns_B=inputs["one_returns_B"],
         bootstrap_B=inputs["one_bootstrap_B"],
     )
+
+
+def one_step_inputs(
+    replay: ReplayBuffer, batch: Batch, gamma: float, device: torch.device
+) -> tuple[Tensors, Batch]:
+    """The ``one_*`` inputs of ``k_target = max``: the one-step windows of a minibatch's starts
+    (the same s and a, so only s', r and gamma), and those windows."""
+    one = replay.gather(batch.env_index, batch.index, 1, gamma)
+    inputs = {
+        "one_next_obs_B": obs_tensor(one.next_obs, device),
+        "one_returns_B": to_device(one.returns, device),
+        "one_bootstrap_B": to_device(one.bootstrap, device),
+    }
+    return inputs, one
 
 
 def one_step_draws(draws: Tensors) -> Tensors:

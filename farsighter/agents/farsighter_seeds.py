@@ -11,17 +11,14 @@ Its gradients, gradient clipping and optimizer steps are its own, so on CPU each
 for bit as ``FarsighterAgent`` trains it alone (``tests/test_seeds.py``). :meth:`member` is one
 seed seen as an agent, and its checkpoint is the one the run alone writes.
 
-Seeds train as a batch where the agent alone keeps no per-row state outside what is batched here:
-the posterior in ``incremental`` mode (the default; ``batch`` mode rescans each seed's replay),
-no target cache (it keys on rows of one replay; the default ``general`` preset has none), fixed k
-(adaptive k moves each seed's k on its own); :func:`supports` says which settings train alone.
+A batch refuses (:func:`supports`) the target cache (it keys on rows of one replay) and
+adaptive k (it moves each seed's k on its own); those seeds train in turn.
 """
 
 from __future__ import annotations
 
-import dataclasses
 from collections.abc import Sequence
-from typing import Any
+from functools import partial
 
 import gymnasium as gym
 import numpy as np
@@ -34,35 +31,42 @@ from farsighter.agents.common import (
     build_seeded,
     crossed,
     make_optimizer,
+    minibatch_args,
     obs_tensor,
-    row_bytes,
     td_loss,
-    to_device,
     updates_owed,
-    uses_gpu_replay,
 )
 from farsighter.agents.cuda_graph import Tensors
-from farsighter.agents.farsighter import RECENT_FEATURES, FarsighterCounters, refresh_posterior
 from farsighter.agents.farsighter_loss import (
     eq8_targets,
     max_targets,
+    one_step_batch,
     one_step_draws,
+    one_step_inputs,
     q_taken,
     target_draws,
 )
+from farsighter.agents.farsighter_posterior import (
+    RECENT_FEATURES,
+    FarsighterCounters,
+    accumulate,
+    make_head,
+    refresh_posterior,
+)
 from farsighter.agents.learner import make_target_cache
+from farsighter.agents.seed_members import FarsighterSeedMember, seed_replay, stack_refusal
 from farsighter.config import Config
 from farsighter.exploration import ThompsonExploration
 from farsighter.networks import make_torso
-from farsighter.ops.blr import BLRHead
 from farsighter.replay import VectorStep
-from farsighter.replay.seeds import SeedReplay
 from farsighter.stacked import (
     StackedQNetwork,
     clip_per_seed,
-    load_member_optimizer_state,
-    member_optimizer_state,
 )
+
+Features = dict[str, tuple[torch.Tensor, torch.Tensor]]
+"""phi(s') and phi_target(s') of every seed, (S, B, D) each, of the k-step windows ('') and the
+one-step windows ('one_') of ``k_target max``."""
 
 ALGOS = ("farsighter", "bdqn")
 """The Bayesian algorithms with a seed-batched form."""
@@ -70,30 +74,42 @@ ALGOS = ("farsighter", "bdqn")
 
 def supports(cfg: Config, obs_space: gym.Space | None, device: torch.device) -> str:
     """Why ``cfg`` cannot train as a seed batch here ('' when it can)."""
-    if not isinstance(obs_space, gym.spaces.Box) or len(obs_space.shape or ()) == 3:
-        return "image observations train their seeds one at a time (batched: flat observations)"
-    if cfg.runtime.precision != "fp32" or cfg.runtime.compile or cfg.runtime.cuda_graph == "on":
-        return "precision bf16, compile and cuda_graph train their seeds one at a time"
     if cfg.adaptive_k.enabled:
         return "adaptive k trains its seeds one at a time (each seed's k moves on its own)"
     if make_target_cache(cfg, device, 1) is not None:
-        return (
-            "the target cache trains its seeds one at a time (--runtime.target-cache off batches)"
-        )
-    return ""
+        return "the target cache trains its seeds one at a time (--runtime.target-cache off)"
+    return stack_refusal(cfg, obs_space)
 
 
-@dataclasses.dataclass
-class _SeedParts:
-    """What one seed owns that the agent alone owns too."""
+class _Seed:
+    """One seed's own parts, made and seeded as ``FarsighterAgent`` makes them alone, and its
+    Eq. 8 on given features."""
 
-    head: BLRHead
-    target_mean_AD: torch.Tensor
-    counters: FarsighterCounters
-    exploration: ThompsonExploration
-    recent_phi: RecentRows
-    rng: np.random.Generator
-    gen: torch.Generator
+    def __init__(
+        self, cfg: Config, num_actions: int, dim: int, init_AD: torch.Tensor, device: torch.device
+    ) -> None:
+        self.cfg = cfg
+        self.head = make_head(cfg, num_actions, dim, init_AD, device)
+        self.target_mean_AD = self.head.mean_AD.clone()
+        self.counters = FarsighterCounters(k=cfg.k)
+        self.exploration = ThompsonExploration(cfg, self.head, self.counters)
+        self.recent_phi = RecentRows(RECENT_FEATURES)
+        self.rng = np.random.default_rng(cfg.seed + 2)
+        self.gen = torch.Generator(device=device)
+        self.gen.manual_seed(cfg.seed + 3)
+
+    def draws(self, rows: int, one_step: bool) -> Tensors:
+        """The targets' draws (``FarsighterAgent._draws``), from this seed's generator."""
+        acting = partial(self.exploration.acting_draw, self.gen)
+        return target_draws(self.cfg.blr.target, self.head, rows, one_step, self.gen, acting)
+
+    @torch.no_grad()
+    def y(
+        self, t: TensorBatch, phi_next: torch.Tensor, phi_next_target: torch.Tensor, draws: Tensors
+    ) -> torch.Tensor:
+        """y of Eq. 8 under this seed's posterior and target mean."""
+        head, kind = self.head, self.cfg.blr.target
+        return eq8_targets(head, self.target_mean_AD, kind, t, phi_next, phi_next_target, draws)
 
 
 class SeedBatchFarsighter:
@@ -124,45 +140,11 @@ class SeedBatchFarsighter:
         self.torso_target.requires_grad_(False)
         self.params = list(self.torso.parameters())
         self.opt = make_optimizer(self.params, cfg)
-        self.parts: list[_SeedParts] = []
-        b = cfg.blr
-        for c, (_, init_AD) in zip(cfgs, built, strict=True):
-            head = BLRHead(
-                num_actions=self.num_actions,
-                dim=self.dim,
-                prior_std=b.prior_std,
-                noise_std=b.noise_std,
-                cov_scale=b.cov_scale,
-                forgetting=b.forgetting,
-                scale=b.scale,
-                device=device,
-            )
-            head.set_mean(init_AD.to(device))
-            counters = FarsighterCounters(k=cfg.k)
-            gen = torch.Generator(device=device)
-            gen.manual_seed(c.seed + 3)
-            self.parts.append(
-                _SeedParts(
-                    head=head,
-                    target_mean_AD=head.mean_AD.clone(),
-                    counters=counters,
-                    exploration=ThompsonExploration(c, head, counters),
-                    recent_phi=RecentRows(RECENT_FEATURES),
-                    rng=np.random.default_rng(c.seed + 2),
-                    gen=gen,
-                )
-            )
-        self.replay = SeedReplay(  # each seed's streams and generator (seed + 1), as alone
-            [c.seed + 1 for c in cfgs],
-            cfg.buffer_size,
-            tuple(obs_space.shape or ()),
-            obs_space.dtype,
-            num_envs=cfg.num_envs,
-            action_dtype=np.int32,
-            device=device
-            if uses_gpu_replay(cfg, device, row_bytes(obs_space, 1) * len(cfgs))
-            else None,
-        )
+        self.parts = [
+            _Seed(c, self.num_actions, self.dim, init_AD, device)
+            for c, (_, init_AD) in zip(cfgs, built, strict=True)
+        ]
+        self.replay = seed_replay(cfgs, obs_space, device)
 
     @property
     def seeds(self) -> int:
@@ -221,26 +203,14 @@ class SeedBatchFarsighter:
         cfg, S, B = self.cfg, self.seeds, self.cfg.batch_size
         k = self.parts[0].counters.k
         try:
-            batch = self.replay.sample_seeds(  # sample_minibatch's, seed by seed
-                B,
-                k=k,
-                gamma=cfg.gamma,
-                recent=cfg.effective_recent_window if cfg.sample_recent else None,
-                stride=k if cfg.stride else 1,
-                on_device=True,
-            )
+            batch = self.replay.sample_seeds(B, **minibatch_args(cfg, k))
         except ValueError:  # not enough complete k-step windows yet
             return None
         t = batch_tensors(batch, self.device)
         inputs: Tensors = t.tensors()
         one_step = cfg.k_target == "max" and k > 1
         if one_step:  # the larger of the k-step and the one-step target (FarsighterAgent.update)
-            one = self.replay.gather(batch.env_index, batch.index, 1, cfg.gamma)
-            inputs.update(
-                one_next_obs_B=obs_tensor(one.next_obs, self.device),
-                one_returns_B=to_device(one.returns, self.device),
-                one_bootstrap_B=to_device(one.bootstrap, self.device),
-            )
+            inputs.update(one_step_inputs(self.replay, batch, cfg.gamma, self.device)[0])
 
         def by_seed(x: torch.Tensor) -> torch.Tensor:
             return x.view(S, B, *x.shape[1:])
@@ -269,70 +239,26 @@ class SeedBatchFarsighter:
         if cfg.max_grad_norm > 0:
             clip_per_seed(self.params, S, cfg.max_grad_norm)
         self.opt.step()
-        if cfg.blr.mode == "incremental":
-            self._accumulate(phi_SBD, seeded, ys, features[""][1])
+        if cfg.blr.mode == "incremental":  # FarsighterAgent.update's statistics, seed by seed
+            for s, (p, mine, y_B) in enumerate(zip(self.parts, seeded, ys, strict=True)):
+                if cfg.blr.posterior_target != "double":
+                    y_B = max_targets(TensorBatch.of(mine), features[""][1][s], p.target_mean_AD)
+                accumulate(cfg, p.head, p.recent_phi, phi_SBD[s].detach(), mine["actions_B"], y_B)
         return [loss.detach() for loss in losses]
 
-    @torch.no_grad()
-    def _accumulate(
-        self,
-        phi_SBD: torch.Tensor,
-        seeded: list[Tensors],
-        ys: list[torch.Tensor],
-        phi_next_target_SBD: torch.Tensor,
-    ) -> None:
-        """Each seed's minibatch into its posterior's statistics (``FarsighterAgent._accumulate``,
-        with the regression targets its loss hands it)."""
-        cfg = self.cfg
-        root_w = (cfg.train_every / cfg.batch_size) ** 0.5
-        for s, (p, mine, y_B) in enumerate(zip(self.parts, seeded, ys, strict=True)):
-            phi_BD = phi_SBD[s].detach()
-            if cfg.blr.posterior_target != "double":
-                y_B = max_targets(_batch(mine), phi_next_target_SBD[s], p.target_mean_AD)
-            p.head.accumulate(phi_BD * root_w, mine["actions_B"], y_B * root_w)
-            p.recent_phi.add(phi_BD)
-
     def _targets(
-        self,
-        p: _SeedParts,
-        mine: Tensors,
-        features: dict[str, tuple[torch.Tensor, torch.Tensor]],
-        s: int,
-        one_step: bool,
+        self, p: _Seed, mine: Tensors, features: Features, s: int, one_step: bool
     ) -> torch.Tensor:
         """Seed ``s``'s y of Eq. 8 on its features (``FarsighterLoss.__call__``'s targets)."""
-        draws = target_draws(
-            self.cfg.blr.target,
-            p.head,
-            len(mine["actions_B"]),
-            one_step,
-            p.gen,
-            lambda: p.exploration.acting_draw(p.gen),
-        )
-        with torch.no_grad():
-            kind, t = self.cfg.blr.target, _batch(mine)
-            phi_next, phi_next_target = features[""]
-            y_B = eq8_targets(
-                p.head, p.target_mean_AD, kind, t, phi_next[s], phi_next_target[s], draws
-            )
-            if one_step:
-                one_next, one_next_target = features["one_"]
-                one = _batch(mine, "one_")
-                y_B = torch.maximum(
-                    y_B,
-                    eq8_targets(
-                        p.head,
-                        p.target_mean_AD,
-                        kind,
-                        one,
-                        one_next[s],
-                        one_next_target[s],
-                        one_step_draws(draws),
-                    ),
-                )
-        return y_B
+        draws = p.draws(len(mine["actions_B"]), one_step)
+        y_B = p.y(TensorBatch.of(mine), features[""][0][s], features[""][1][s], draws)
+        if not one_step:
+            return y_B
+        one = one_step_batch(TensorBatch.of(mine), mine)
+        one_next, one_next_target = features["one_"]
+        return torch.maximum(y_B, p.y(one, one_next[s], one_next_target[s], one_step_draws(draws)))
 
-    def _refresh(self, s: int, p: _SeedParts) -> None:
+    def _refresh(self, s: int, p: _Seed) -> None:
         """Algorithm 1 line 6 for one seed (``FarsighterAgent.refresh_posterior``): a batch-mode
         fit runs the seed's own networks over its own streams' rows."""
         cfg = self.cfg
@@ -342,18 +268,8 @@ class SeedBatchFarsighter:
             phi_next_target = self.torso_target.member_forward(t.next_obs_B, s)
             if not double:
                 return max_targets(t, phi_next_target, p.target_mean_AD)
-            draws = target_draws(
-                cfg.blr.target,
-                p.head,
-                len(t.actions_B),
-                False,
-                p.gen,
-                lambda: p.exploration.acting_draw(p.gen),
-            )
-            phi_next = self.torso.member_forward(t.next_obs_B, s)
-            return eq8_targets(
-                p.head, p.target_mean_AD, cfg.blr.target, t, phi_next, phi_next_target, draws
-            )
+            draws = p.draws(len(t.actions_B), False)
+            return p.y(t, self.torso.member_forward(t.next_obs_B, s), phi_next_target, draws)
 
         refresh_posterior(
             cfg,
@@ -371,98 +287,6 @@ class SeedBatchFarsighter:
     # ------------------------------------------------------------------ one seed
     def member(self, s: int) -> FarsighterSeedMember:
         return FarsighterSeedMember(self, s)
-
-
-def _batch(inputs: Tensors, prefix: str = "") -> TensorBatch:
-    """A seed's :class:`TensorBatch` (``prefix = "one_"``: its one-step windows, same s and a)."""
-    return TensorBatch(
-        obs_B=inputs["obs_B"],
-        next_obs_B=inputs[prefix + "next_obs_B"],
-        actions_B=inputs["actions_B"],
-        returns_B=inputs[prefix + "returns_B"],
-        bootstrap_B=inputs[prefix + "bootstrap_B"],
-    )
-
-
-class FarsighterSeedMember:
-    """Seed ``s`` of a batch as an agent: what the run log, evaluation and checkpoints use."""
-
-    def __init__(self, batch: SeedBatchFarsighter, s: int) -> None:
-        self.batch, self.s = batch, s
-        self.cfg = batch.cfgs[s]
-        self.parts = batch.parts[s]
-
-    def act(self, obs_E: np.ndarray, global_step: int, explore: bool = True) -> np.ndarray:
-        if explore:
-            raise NotImplementedError("a seed of a batch explores through the batch's act")
-        with torch.no_grad():  # evaluation: greedy under the posterior mean
-            return (self._phi(obs_E) @ self.parts.head.mean_AD.T).argmax(dim=1).cpu().numpy()
-
-    @torch.no_grad()
-    def q_estimate(self, obs_B: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-        phi_BD = self._phi(obs_B)
-        mean_BA = phi_BD @ self.parts.head.mean_AD.T
-        return mean_BA.cpu().numpy(), self.parts.head.predictive_var(phi_BD).cpu().numpy()
-
-    def _phi(self, obs_B: np.ndarray) -> torch.Tensor:
-        """phi(s) of this seed's torso, (B, D)."""
-        b = self.batch
-        return b.torso.member_forward(obs_tensor(np.asarray(obs_B), b.device), self.s)
-
-    def observe(self, step: VectorStep) -> None:
-        raise NotImplementedError("a seed of a batch records its steps through the batch")
-
-    def learn(self, global_step: int) -> dict[str, torch.Tensor]:
-        raise NotImplementedError("a seed of a batch learns through the batch")
-
-    def diagnostics(self) -> dict[str, float]:
-        head, c = self.parts.head, self.parts.counters
-        return {
-            "k": float(c.k),
-            "q_variance": c.q_variance,
-            "posterior_refreshes": float(head.num_refreshes),
-            "jitter_events": float(head.jitter_events),
-            "noise_std": head.noise_std,
-        }
-
-    def state_dict(self, include_replay: bool = True) -> dict[str, Any]:
-        """The checkpoint of ``FarsighterAgent`` alone, for this seed."""
-        b, s, p = self.batch, self.s, self.parts
-        return {
-            "torso": b.torso.member_state(s),
-            "torso_target": b.torso_target.member_state(s),
-            "head": p.head.state_dict(),
-            "target_mean_AD": p.target_mean_AD.clone(),
-            "opt": member_optimizer_state(b.opt, s),
-            "rng": p.rng.bit_generator.state,
-            "gen": p.gen.get_state(),
-            "counters": dataclasses.asdict(p.counters),
-            "replay": b.replay.member_state(s) if include_replay else None,
-            "exploration": p.exploration.state_dict(),
-            "recent_phi": p.recent_phi.state_dict(),
-            "target_cache": None,
-        }
-
-    def load_state_dict(self, state: dict[str, Any]) -> None:
-        """A checkpoint of this seed (written alone or in a batch). Seeds resume together only
-        from checkpoints with the same counters (:func:`farsighter.seeds.train_seeds` groups
-        them so)."""
-        b, s, p = self.batch, self.s, self.parts
-        b.torso.load_member(s, state["torso"])
-        b.torso_target.load_member(s, state["torso_target"])
-        p.head.load_state_dict(state["head"])
-        p.target_mean_AD.copy_(state["target_mean_AD"])
-        load_member_optimizer_state(b.opt, s, state["opt"])
-        p.rng.bit_generator.state = state["rng"]
-        p.gen.set_state(state["gen"])
-        for key, value in state["counters"].items():
-            setattr(p.counters, key, value)
-        p.recent_phi.load_state_dict(state["recent_phi"])
-        p.exploration.load_state_dict(state.get("exploration", state))
-        if state.get("replay") is not None:
-            b.replay.load_member(s, state["replay"])
-        else:
-            p.counters.hold_pending = True
 
 
 SeedBatch = SeedBatchFarsighter

@@ -1,0 +1,135 @@
+"""Farsighter's posterior refresh (Algorithm 1 lines 6 and 7), for one posterior: written once
+for :class:`~farsighter.agents.farsighter.FarsighterAgent` and each seed of
+:class:`~farsighter.agents.farsighter_seeds.SeedBatchFarsighter`, which hand it their own
+networks (``torso``) and regression targets (``targets``)."""
+
+from __future__ import annotations
+
+from collections.abc import Callable
+from dataclasses import dataclass
+
+import numpy as np
+import torch
+
+from farsighter.agents.common import Counters, RecentRows, TensorBatch, adapt_k, batch_tensors
+from farsighter.config import Config
+from farsighter.ops.blr import BLRHead, greedy_predictive_variance
+from farsighter.replay import ReplayBuffer
+
+FEATURE_CHUNK = 4_096  # rows per forward pass when computing features for a posterior refresh
+RECENT_FEATURES = 2_048  # incremental mode: minibatch features kept for adaptive k's Q-variance
+
+
+@dataclass
+class FarsighterCounters(Counters):
+    refreshes: int = 0  # posterior refreshes made (every M steps)
+    draws: int = 0  # Thompson draws made (one per environment and acting step with redraw=step)
+    steps_since_draw: int = 0  # acting steps since the held draw (redraw = every, k)
+    q_variance: float = float("nan")  # at the latest refresh (adaptive k's signal)
+
+
+def make_head(
+    cfg: Config, num_actions: int, dim: int, init_AD: torch.Tensor, device: torch.device
+) -> BLRHead:
+    """The BLR posterior of ``cfg.blr`` over ``num_actions`` weight vectors of width ``dim``,
+    its mean starting at ``init_AD`` (where a linear Q head would start)."""
+    b = cfg.blr
+    head = BLRHead(
+        num_actions=num_actions,
+        dim=dim,
+        prior_std=b.prior_std,
+        noise_std=b.noise_std,
+        cov_scale=b.cov_scale,
+        forgetting=b.forgetting,
+        scale=b.scale,
+        device=device,
+    )
+    head.set_mean(init_AD.to(device))
+    return head
+
+
+def accumulate(
+    cfg: Config,
+    head: BLRHead,
+    recent_phi: RecentRows,
+    phi_BD: torch.Tensor,
+    a_B: torch.Tensor,
+    y_B: torch.Tensor,
+) -> None:
+    """Incremental mode: add a minibatch to the running statistics with weight
+    w = train_every / batch_size (scaling phi and y by sqrt(w) scales Phi Phi^T and Phi y by w),
+    and keep its features for adaptive k's Q-variance."""
+    root_w = (cfg.train_every / cfg.batch_size) ** 0.5
+    head.accumulate(phi_BD * root_w, a_B, y_B * root_w)
+    recent_phi.add(phi_BD)
+
+
+def refresh_posterior(
+    cfg: Config,
+    head: BLRHead,
+    counters: FarsighterCounters,
+    recent_phi: RecentRows,
+    replay: ReplayBuffer,
+    rng: np.random.Generator,
+    device: torch.device,
+    torso: Callable[[torch.Tensor], torch.Tensor],
+    targets: Callable[[TensorBatch], torch.Tensor],
+    streams: slice = slice(None),
+) -> None:
+    """Algorithm 1 line 6 (and line 7 with adaptive k) for one posterior: in batch mode a fit
+    on the features (``torso``) and regression targets (``targets``) of D tuples of the replay's
+    ``streams`` (:func:`refresh_rows`); in incremental mode from its running statistics."""
+    if cfg.blr.mode == "batch":
+        d, k = cfg.blr.posterior_samples, counters.k
+        if cfg.blr.posterior_sampling == "uniform":  # the BDQN code: whole buffer, replaced
+            e_N, l_N = replay.uniform_indices(d, rng, streams)
+        else:  # the latest D tuples; with stride one is stored per k steps, so k D rows
+            e_N, l_N = replay.recent_indices(d * (k if cfg.stride else 1), streams)
+        phi_ND, a_N, y_N = refresh_rows(replay, e_N, l_N, cfg, k, device, torso, targets)
+        if len(a_N) == 0:
+            return
+        head.fit(phi_ND, a_N, y_N)  # statistics reset each refresh, as in BDQN's code
+    else:  # the statistics are already up to date: no features are recomputed
+        recent = recent_phi.rows()
+        if recent is None:
+            return
+        head.refresh()
+        phi_ND = recent
+    counters.q_variance = greedy_predictive_variance(head, phi_ND)
+    adapt_k(counters, counters.q_variance, cfg.adaptive_k, replay)
+
+
+@torch.no_grad()
+def refresh_rows(
+    replay: ReplayBuffer,
+    e_N: np.ndarray,
+    l_N: np.ndarray,
+    cfg: Config,
+    k: int,
+    device: torch.device,
+    torso: Callable[[torch.Tensor], torch.Tensor],
+    targets: Callable[[TensorBatch], torch.Tensor],
+) -> tuple[torch.Tensor, torch.Tensor, torch.Tensor]:
+    """Features of the current theta (``torso``) and the regression targets (``targets``) of
+    the valid k-step tuples starting at the given rows of ``replay``: a batch-mode posterior
+    refresh's data, gathered chunk by chunk (stacked frames are never all in memory)."""
+    phis, actions, ys = [], [], []
+    for lo in range(0, len(e_N), FEATURE_CHUNK):
+        part = replay.sample_indices(
+            e_N[lo : lo + FEATURE_CHUNK],
+            l_N[lo : lo + FEATURE_CHUNK],
+            k,
+            cfg.gamma,
+            stride=k if cfg.stride else 1,  # Algorithm 1: one tuple per k
+            on_device=True,  # from the device mirror when the replay keeps one
+        )
+        if len(part.actions) == 0:
+            continue
+        t = batch_tensors(part, device)
+        phis.append(torso(t.obs_B))
+        actions.append(t.actions_B)
+        ys.append(targets(t))
+    if not phis:
+        empty = torch.zeros(0, device=device)
+        return empty, empty.long(), empty
+    return torch.cat(phis), torch.cat(actions), torch.cat(ys)
