@@ -70,8 +70,13 @@ def _files(run: Path) -> dict[str, list[str]]:
         # Table 1's control column: batch-mode refreshes over each seed's latest tuples, the
         # recent window, k = 10 (the target cache off: it keys on one replay's rows)
         ("farsighter", "CartPole-v1", {"runtime__target_cache": "off"}),
-        # BDQN of the control column: a refit from each seed's own replay every 400 steps
-        ("bdqn", "farsighter/DeepSea6-v0", {"blr__posterior_sampling": "uniform"}),
+        # BDQN of the control column: a refit from each seed's own replay every 400 steps, on
+        # the steps of a target copy too (the refit reads the target torso before the copy)
+        (
+            "bdqn",
+            "farsighter/DeepSea6-v0",
+            {"blr__posterior_sampling": "uniform", "target_update_every": 400},
+        ),
         # the BDQN code's targets: the acting draw's argmax, the max regression target, Huber
         (
             "bdqn",
@@ -306,26 +311,33 @@ def test_seed_replay_samples_each_seed_as_its_replay_alone() -> None:
 def test_a_study_batches_the_seeds_of_ddqn_and_its_runs_are_those_alone(
     tmp_path: Path, monkeypatch: pytest.MonkeyPatch
 ) -> None:
-    """The maze study (its probe callback included) trains DDQN's two seeds as one batch and
-    Farsighter's one after another; every file of every run equals the study run job by job."""
+    """The maze study (its probe callback included) trains DDQN's and BDQN's two seeds as one
+    batch each and Farsighter's (the target cache of its recent window) one after another; every
+    file of every run equals the study run job by job. With two workers and one agent's three
+    seeds, the batches are of two and one (no core left idle)."""
     from farsighter.studies import maze, runner
 
     args = ["--steps", "1200", "--seeds", "1", "2", "--workers", "1", "--no-progress"]
-    args += ["--agents", "DDQN", "Farsighter (k=10)"]
+    args += ["--agents", "DDQN", "BDQN", "Farsighter (k=10)"]
     settings = runner.settings_from(maze.STUDY, runner.parse(maze.STUDY, args))
     jobs = maze.STUDY.grid(settings)
     groups = runner.seed_batches(maze.STUDY, settings, tmp_path / "x", jobs)
-    assert [[(j.label, j.seed) for j in g] for g in groups] == [
+    assert sorted([(j.label, j.seed) for j in g] for g in groups) == [
+        [("BDQN", 1), ("BDQN", 2)],
         [("DDQN", 1), ("DDQN", 2)],
         [("Farsighter (k=10)", 1)],
         [("Farsighter (k=10)", 2)],
     ]
+    three = ["--seeds", "1", "2", "3", "--workers", "2", "--agents", "DDQN"]
+    spread = runner.settings_from(maze.STUDY, runner.parse(maze.STUDY, three))
+    split = runner.seed_batches(maze.STUDY, spread, tmp_path / "x", maze.STUDY.grid(spread))
+    assert [[j.seed for j in g] for g in split] == [[1, 2], [3]]
     assert main(["maze", *args, "--out", str(tmp_path / "batched")]) == 0
     monkeypatch.setattr(runner, "SEEDS_PER_BATCH", 1)
     assert main(["maze", *args, "--out", str(tmp_path / "alone")]) == 0
-    for run in ("ddqn__s1", "ddqn__s2", "farsighter-k-10__s2"):
+    for run in ("ddqn__s1", "ddqn__s2", "bdqn__s1", "bdqn__s2", "farsighter-k-10__s2"):
         a, b = tmp_path / "alone" / "runs" / run, tmp_path / "batched" / "runs" / run
         assert (a / "probe.csv").read_text() == (b / "probe.csv").read_text(), run
         assert _files(a) == _files(b), run
-        if run.startswith("ddqn"):
+        if not run.startswith("farsighter"):
             _same_states(_agent_state(a / "policy.pt"), _agent_state(b / "policy.pt"))

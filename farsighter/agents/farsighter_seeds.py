@@ -183,17 +183,20 @@ class SeedBatchFarsighter:
             losses = self.update()
             if losses is not None:
                 metrics = [{"td_loss": loss} for loss in losses]
-        copied = False
+        # Algorithm 1's order for each seed: its refresh (line 6), then its target copy (line
+        # 8). Every refresh first: one copy moves every seed's target torso at once.
         for s, p in enumerate(self.parts):
-            c = p.counters
             if global_step >= cfg.learning_starts and crossed(
-                c, "refreshes", global_step, cfg.blr.posterior_every
+                p.counters, "refreshes", global_step, cfg.blr.posterior_every
             ):
                 self._refresh(s, p)
-            if crossed(c, "target_syncs", global_step, cfg.target_update_every):
-                if not copied:  # every seed's torso at once
-                    self.torso_target.load_state_dict(self.torso.state_dict())
-                    copied = True
+        synced = [
+            crossed(p.counters, "target_syncs", global_step, cfg.target_update_every)
+            for p in self.parts
+        ]
+        if any(synced):  # the seeds step together: all of them
+            self.torso_target.load_state_dict(self.torso.state_dict())
+            for p in self.parts:
                 p.target_mean_AD.copy_(p.head.mean_AD)
         return metrics
 

@@ -13,6 +13,7 @@ from __future__ import annotations
 
 import dataclasses
 import json
+import os
 import shutil
 import time
 from collections.abc import Callable, Sequence
@@ -409,10 +410,16 @@ SEEDS_PER_BATCH = 16
 
 
 def seed_batches(study: Study, settings: Any, out: Path, jobs: Sequence[Job]) -> list[list[Job]]:
-    """The jobs as the worker processes take them: the seeds of one agent and task together (up
-    to :data:`SEEDS_PER_BATCH`) where the agent trains seeds as one batch
-    (:func:`farsighter.seeds.batchable`), every other job alone; in the order of ``jobs``."""
+    """The jobs as the worker processes take them: the seeds of one agent and task together
+    where the agent trains seeds as one batch (:func:`farsighter.seeds.batchable`), every other
+    job alone; in the order of ``jobs``. A batch holds at most :data:`SEEDS_PER_BATCH` seeds, and
+    no more than an even share of the jobs per worker (``settings.workers``), so that a study of
+    one agent's five seeds on two workers runs as batches of three and two rather than leaving a
+    core idle beside one batch of five."""
     from farsighter.seeds import batchable
+
+    workers = settings.workers or os.cpu_count() or 1
+    size = max(1, min(SEEDS_PER_BATCH, -(-len(jobs) // workers)))
 
     batches: dict[tuple[str, str | None], bool] = {}
 
@@ -422,7 +429,7 @@ def seed_batches(study: Study, settings: Any, out: Path, jobs: Sequence[Job]) ->
             batches[run] = batchable(study.config(settings, job, job.run_dir(out)))
         return run if batches[run] else job  # a job of its own where the agent has no batch
 
-    return chunk_by(jobs, key, SEEDS_PER_BATCH)
+    return chunk_by(jobs, key, size)
 
 
 def _run_jobs(
