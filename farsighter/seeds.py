@@ -1,10 +1,10 @@
 """Several seeds of one config in one process, as one batched computation.
 
-``farsighter train --seeds 1 2 ... S`` trains S independent runs. Where the agent has a seed-batched
-form (:data:`BATCHED`: DDQN and k-DDQN, Farsighter and BDQN) they train together: one forward pass acts
-for every seed, one backward pass updates them all, and the loop below steps each seed's own
-environments, replay and run log in turn. Elsewhere the seeds train one after another through
-:func:`farsighter.train.train`. Either way each seed is an ordinary run:
+``farsighter train --seeds 1 2 ... S`` trains S independent runs. Where the agent has a
+seed-batched form (:data:`BATCHED`: DDQN and k-DDQN, Farsighter and BDQN, RND and k-RND) they
+train together: one forward pass acts for every seed, one backward pass updates them all, and
+the loop below steps each seed's own environments, replay and run log in turn. Elsewhere the
+seeds train one after another through :func:`farsighter.train.train`. Either way each seed is an ordinary run:
 
 * its own run directory (``runs/<env>__<algo>__s<seed>``, or ``RUN_DIR/s<seed>`` under a given
   ``--run-dir``), with the files, checkpoints and summary a run alone writes;
@@ -30,7 +30,7 @@ import numpy as np
 import torch
 from tqdm import tqdm
 
-from farsighter.agents import ddqn_seeds, farsighter_seeds
+from farsighter.agents import ddqn_seeds, farsighter_seeds, rnd_seeds
 from farsighter.config import Config, validate
 from farsighter.envs import check_spaces, make_vector_env
 from farsighter.errors import ConfigError
@@ -45,6 +45,7 @@ __all__ = ["BATCHED", "batchable", "seed_configs", "train_seeds"]
 BATCHED = {
     **{algo: ddqn_seeds for algo in ddqn_seeds.ALGOS},
     **{algo: farsighter_seeds for algo in farsighter_seeds.ALGOS},
+    **{algo: rnd_seeds for algo in rnd_seeds.ALGOS},
 }
 """The algorithms with a seed-batched form -> its module (``supports``, the batch class)."""
 

@@ -77,6 +77,10 @@ def _files(run: Path) -> dict[str, list[str]]:
             "farsighter/DeepSea6-v0",
             {"blr__posterior_sampling": "uniform", "target_update_every": 400},
         ),
+        # RND: each seed's bonus (its networks, Adam, whitening and reward statistics)
+        ("rnd", "CartPole-v1", {"preset": "general"}),
+        # k-step intrinsic returns over windows cut by episode ends, two envs a seed
+        ("krnd", "farsighter/DeepSea6-v0", {"num_envs": 2, "batch_size": 24}),
         # the BDQN code's targets: the acting draw's argmax, the max regression target, Huber
         (
             "bdqn",
@@ -107,7 +111,9 @@ def test_a_seed_in_a_batch_trains_as_it_does_alone(
     # the seeds are different runs
     first = _agent_state(tmp_path / "batch" / f"s{SEEDS[0]}" / "policy.pt")
     second = _agent_state(tmp_path / "batch" / f"s{SEEDS[1]}" / "policy.pt")
-    net, name = ("q", "head.weight") if algo == "ddqn" else ("torso", "net.0.weight")
+    net, name = (
+        ("torso", "net.0.weight") if "bdqn" in algo or "far" in algo else ("q", "head.weight")
+    )
     assert not torch.equal(first[net][name], second[net][name])
 
 
@@ -157,7 +163,12 @@ def _agent_state(path: Path) -> dict[str, Any]:
 
 
 @pytest.mark.parametrize(
-    ("algo", "values"), [("ddqn", {"k": 2}), ("farsighter", {"preset": "general", "k": 3})]
+    ("algo", "values"),
+    [
+        ("ddqn", {"k": 2}),
+        ("farsighter", {"preset": "general", "k": 3}),
+        ("rnd", {"preset": "general"}),
+    ],
 )
 def test_a_batch_killed_midway_resumes_in_a_batch_or_alone(
     tmp_path: Path, tiny_config: Any, algo: str, values: dict[str, Any]

@@ -20,6 +20,7 @@ import torch
 
 from farsighter.agents.common import (
     Counters,
+    TensorBatch,
     batch_tensors,
     build_seeded,
     elementwise_td_loss,
@@ -33,7 +34,7 @@ from farsighter.config import Config
 from farsighter.exploration.epsilon import epsilon_draws, linear_schedule
 from farsighter.networks import QNetwork
 from farsighter.ops.targets import double_q_target
-from farsighter.replay import VectorStep
+from farsighter.replay import Batch, VectorStep
 from farsighter.stacked import (
     StackedQNetwork,
     clip_per_seed,
@@ -131,7 +132,7 @@ class SeedBatchDDQN:
         losses, (S, B)."""
         cfg, k, S = self.cfg, self.counters.k, self.seeds
         batch = self.replay.sample_seeds(cfg.batch_size, **minibatch_args(cfg, k))
-        t = batch_tensors(batch, self.device)
+        t = self.returns(batch, batch_tensors(batch, self.device))
 
         def by_seed(x: torch.Tensor) -> torch.Tensor:
             return x.view(S, cfg.batch_size, *x.shape[1:])
@@ -151,7 +152,15 @@ class SeedBatchDDQN:
         if cfg.max_grad_norm > 0:
             clip_per_seed(self.params, S, cfg.max_grad_norm)
         self.opt.step()
+        self.after_update(t)
         return loss_SB.detach()
+
+    def returns(self, batch: Batch, t: TensorBatch) -> TensorBatch:
+        """The minibatch the loss learns from (RND adds its bonus to the returns here)."""
+        return t
+
+    def after_update(self, t: TensorBatch) -> None:
+        """After every seed's step (RND trains its predictors here)."""
 
     # ------------------------------------------------------------------ one seed
     def member(self, s: int) -> SeedMember:

@@ -6,6 +6,7 @@ seed started in a batch resumes alone, and the other way round."""
 
 from __future__ import annotations
 
+import copy
 import dataclasses
 from collections.abc import Sequence
 from typing import TYPE_CHECKING, Any
@@ -23,6 +24,7 @@ from farsighter.stacked import load_member_optimizer_state, member_optimizer_sta
 if TYPE_CHECKING:
     from farsighter.agents.ddqn_seeds import SeedBatchDDQN
     from farsighter.agents.farsighter_seeds import SeedBatchFarsighter
+    from farsighter.agents.rnd_seeds import SeedBatchRND
 
 
 def stack_refusal(cfg: Config, obs_space: gym.Space | None) -> str:
@@ -200,3 +202,40 @@ class FarsighterSeedMember(Member):
             b.replay.load_member(s, state["replay"])
         else:
             p.counters.hold_pending = True
+
+
+class RNDSeedMember(SeedMember):
+    """A seed of :class:`~farsighter.agents.rnd_seeds.SeedBatchRND`: ``RNDAgent`` alone."""
+
+    batch: SeedBatchRND
+
+    def diagnostics(self) -> dict[str, float]:
+        bonus = self.batch.bonuses[self.s]
+        return {
+            **super().diagnostics(),
+            "intrinsic_reward": bonus.stats["intrinsic_reward"],
+            "intrinsic_std": float(bonus.intrinsic_rms.std),
+            "predictor_loss": bonus.stats["predictor_loss"],
+        }
+
+    def state_dict(self, include_replay: bool = True) -> dict[str, Any]:
+        """The checkpoint of ``RNDAgent`` alone, for this seed."""
+        bonus = self.batch.bonuses[self.s]
+        return {
+            **super().state_dict(include_replay),
+            **{key: getattr(bonus, key).state_dict() for key in RND_STATEFUL},
+            "epsilon": self.batch.epsilon,
+            "stats": dict(bonus.stats),
+        }
+
+    def load_state_dict(self, state: dict[str, Any]) -> None:
+        super().load_state_dict(state)
+        bonus = self.batch.bonuses[self.s]
+        for key in RND_STATEFUL:  # copies: never the caller's tensors (as load_state does)
+            getattr(bonus, key).load_state_dict(copy.deepcopy(state[key]))
+        bonus.stats = dict(state["stats"])
+        self.batch.epsilon = state["epsilon"]
+
+
+RND_STATEFUL = ("rnd_target", "predictor", "rnd_opt", "obs_rms", "intrinsic_rms")
+"""The pieces of an RND bonus saved by their ``state_dict`` (``RNDAgent``'s keys)."""
