@@ -13,7 +13,7 @@ evaluation and checkpoint excluded: :class:`farsighter.session.RunLog`'s ``loop_
 count for the run alone and the batch. Rounds interleave the entries, so that the machine's drift
 falls on all of them alike.
 
-    python -m benchmarks.seeds_sps [--algo ddqn|farsighter] [--tasks cartpole deepsea]
+    python -m benchmarks.seeds_sps [--algo ddqn|farsighter|rnd] [--tasks cartpole deepsea]
         [--seeds 16] [--rounds 2]
 
 ``--algo farsighter`` runs Farsighter (the library's defaults: the ``general`` preset, k = 10,
@@ -190,7 +190,7 @@ def measure(
 
 def main() -> None:
     p = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawTextHelpFormatter)
-    p.add_argument("--algo", choices=("ddqn", "farsighter"), default="ddqn")
+    p.add_argument("--algo", choices=("ddqn", "farsighter", "rnd"), default="ddqn")
     p.add_argument("--tasks", nargs="+", choices=TASKS, default=list(TASKS))
     p.add_argument("--seeds", type=int, default=16, help="seeds in the batch")
     p.add_argument("--rounds", type=int, default=2)
