@@ -68,8 +68,8 @@ def _files(run: Path) -> dict[str, list[str]]:
             },
         ),
         # Table 1's control column: batch-mode refreshes over each seed's latest tuples, the
-        # recent window, k = 10 (the target cache off: it keys on one replay's rows)
-        ("farsighter", "CartPole-v1", {"runtime__target_cache": "off"}),
+        # recent window, k = 10, each seed's target cache over its own streams (two a seed)
+        ("farsighter", "CartPole-v1", {"num_envs": 2}),
         # BDQN of the control column: a refit from each seed's own replay every 400 steps, on
         # the steps of a target copy too (the refit reads the target torso before the copy)
         (
@@ -140,10 +140,7 @@ def _same_states(alone: Any, batch: Any, where: str = "agent") -> None:
 def test_settings_a_batch_cannot_take_train_alone(tmp_path: Path, tiny_config: Any) -> None:
     """Farsighter's batch refuses what it does not batch, and the seeds then train in turn."""
     base = tiny_config("farsighter", tmp_path, preset="general")
-    for values, says in (
-        ({"adaptive_k__enabled": True}, "adaptive k"),
-        ({"sample_recent": True}, "target cache"),
-    ):
+    for values, says in (({"adaptive_k__enabled": True}, "adaptive k"),):
         cfg = tiny_config("farsighter", tmp_path, preset="general", **values)
         assert says in farsighter_seeds.supports(cfg, _box(), torch.device("cpu"))
         assert not batchable(cfg)
@@ -322,22 +319,23 @@ def test_seed_replay_samples_each_seed_as_its_replay_alone() -> None:
 def test_a_study_batches_the_seeds_of_ddqn_and_its_runs_are_those_alone(
     tmp_path: Path, monkeypatch: pytest.MonkeyPatch
 ) -> None:
-    """The maze study (its probe callback included) trains DDQN's and BDQN's two seeds as one
-    batch each and Farsighter's (the target cache of its recent window) one after another; every
-    file of every run equals the study run job by job. With two workers and one agent's three
-    seeds, the batches are of two and one (no core left idle)."""
+    """The maze study (its probe callback included) trains the two seeds of DDQN, BDQN (refits
+    from the replay) and Farsighter (the target cache of its recent window) as one batch each and
+    OB2I's one after another; every file of every run equals the study run job by job. With two
+    workers and one agent's three seeds, the batches are of two and one (no core left idle)."""
     from farsighter.studies import maze, runner
 
     args = ["--steps", "1200", "--seeds", "1", "2", "--workers", "1", "--no-progress"]
-    args += ["--agents", "DDQN", "BDQN", "Farsighter (k=10)"]
+    args += ["--agents", "DDQN", "BDQN", "Farsighter (k=10)", "OB2I"]
     settings = runner.settings_from(maze.STUDY, runner.parse(maze.STUDY, args))
     jobs = maze.STUDY.grid(settings)
     groups = runner.seed_batches(maze.STUDY, settings, tmp_path / "x", jobs)
     assert sorted([(j.label, j.seed) for j in g] for g in groups) == [
         [("BDQN", 1), ("BDQN", 2)],
         [("DDQN", 1), ("DDQN", 2)],
-        [("Farsighter (k=10)", 1)],
-        [("Farsighter (k=10)", 2)],
+        [("Farsighter (k=10)", 1), ("Farsighter (k=10)", 2)],
+        [("OB2I", 1)],
+        [("OB2I", 2)],
     ]
     three = ["--seeds", "1", "2", "3", "--workers", "2", "--agents", "DDQN"]
     spread = runner.settings_from(maze.STUDY, runner.parse(maze.STUDY, three))
@@ -346,9 +344,8 @@ def test_a_study_batches_the_seeds_of_ddqn_and_its_runs_are_those_alone(
     assert main(["maze", *args, "--out", str(tmp_path / "batched")]) == 0
     monkeypatch.setattr(runner, "SEEDS_PER_BATCH", 1)
     assert main(["maze", *args, "--out", str(tmp_path / "alone")]) == 0
-    for run in ("ddqn__s1", "ddqn__s2", "bdqn__s1", "bdqn__s2", "farsighter-k-10__s2"):
+    for run in ("ddqn__s1", "bdqn__s1", "bdqn__s2", "farsighter-k-10__s1", "farsighter-k-10__s2"):
         a, b = tmp_path / "alone" / "runs" / run, tmp_path / "batched" / "runs" / run
         assert (a / "probe.csv").read_text() == (b / "probe.csv").read_text(), run
         assert _files(a) == _files(b), run
-        if not run.startswith("farsighter"):
-            _same_states(_agent_state(a / "policy.pt"), _agent_state(b / "policy.pt"))
+        _same_states(_agent_state(a / "policy.pt"), _agent_state(b / "policy.pt"))

@@ -11,8 +11,9 @@ Its gradients, gradient clipping and optimizer steps are its own, so on CPU each
 for bit as ``FarsighterAgent`` trains it alone (``tests/test_seeds.py``). :meth:`member` is one
 seed seen as an agent, and its checkpoint is the one the run alone writes.
 
-A batch refuses (:func:`supports`) the target cache (it keys on rows of one replay) and
-adaptive k (it moves each seed's k on its own); those seeds train in turn.
+Each seed keeps its own target cache too (where the run alone has one: a recent window), keyed by
+its own streams. A batch refuses (:func:`supports`) adaptive k (it moves each seed's k on its
+own); those seeds train in turn.
 """
 
 from __future__ import annotations
@@ -58,14 +59,15 @@ from farsighter.agents.seed_members import FarsighterSeedMember, seed_replay, st
 from farsighter.config import Config
 from farsighter.exploration import ThompsonExploration
 from farsighter.networks import make_torso
-from farsighter.replay import VectorStep
+from farsighter.replay import Batch, VectorStep
 from farsighter.stacked import (
     StackedQNetwork,
     clip_per_seed,
 )
 
-Features = dict[str, tuple[torch.Tensor, torch.Tensor]]
-"""phi(s') and phi_target(s') of every seed, (S, B, D) each, of the k-step windows ('') and the
+Features = dict[str, tuple[torch.Tensor, torch.Tensor | list[torch.Tensor]]]
+"""phi(s') and phi_target(s') of every seed, (S, B, D) each (phi_target a list of S from the
+target caches), of the k-step windows ('') and the
 one-step windows ('one_') of ``k_target max``."""
 
 ALGOS = ("farsighter", "bdqn")
@@ -76,8 +78,6 @@ def supports(cfg: Config, obs_space: gym.Space | None, device: torch.device) -> 
     """Why ``cfg`` cannot train as a seed batch here ('' when it can)."""
     if cfg.adaptive_k.enabled:
         return "adaptive k trains its seeds one at a time (each seed's k moves on its own)"
-    if make_target_cache(cfg, device, 1) is not None:
-        return "the target cache trains its seeds one at a time (--runtime.target-cache off)"
     return stack_refusal(cfg, obs_space)
 
 
@@ -97,6 +97,7 @@ class _Seed:
         self.rng = np.random.default_rng(cfg.seed + 2)
         self.gen = torch.Generator(device=device)
         self.gen.manual_seed(cfg.seed + 3)
+        self.cache = make_target_cache(cfg, device, dim)  # FarsighterLoss's, keyed by its streams
 
     def draws(self, rows: int, one_step: bool) -> Tensors:
         """The targets' draws (``FarsighterAgent._draws``), from this seed's generator."""
@@ -144,6 +145,9 @@ class SeedBatchFarsighter:
             _Seed(c, self.num_actions, self.dim, init_AD, device)
             for c, (_, init_AD) in zip(cfgs, built, strict=True)
         ]
+        for cache in (p.cache for p in self.parts if p.cache is not None):
+            # a copy into the target torsos empties every seed's cache (as CachedTarget's does)
+            self.torso_target.register_load_state_dict_post_hook(lambda m, k, c=cache: c.clear())
         self.replay = seed_replay(cfgs, obs_space, device)
 
     @property
@@ -212,20 +216,23 @@ class SeedBatchFarsighter:
         t = batch_tensors(batch, self.device)
         inputs: Tensors = t.tensors()
         one_step = cfg.k_target == "max" and k > 1
+        ends = {"": batch.index + batch.steps}  # the logical rows of s', for the target caches
         if one_step:  # the larger of the k-step and the one-step target (FarsighterAgent.update)
-            inputs.update(one_step_inputs(self.replay, batch, cfg.gamma, self.device)[0])
+            one_inputs, one = one_step_inputs(self.replay, batch, cfg.gamma, self.device)
+            inputs.update(one_inputs)
+            ends["one_"] = batch.index + one.steps
 
         def by_seed(x: torch.Tensor) -> torch.Tensor:
             return x.view(S, B, *x.shape[1:])
 
         with torch.no_grad():  # every seed's features of s' at once; each seed's targets
-            features = {
-                prefix: (
-                    self.torso(by_seed(inputs[prefix + "next_obs_B"])),
-                    self.torso_target(by_seed(inputs[prefix + "next_obs_B"])),
+            features: Features = {}
+            for prefix, end_B in ends.items():
+                next_SB = by_seed(inputs[prefix + "next_obs_B"])
+                features[prefix] = (
+                    self.torso(next_SB),
+                    self._target_features(next_SB, end_B, batch),
                 )
-                for prefix in (("", "one_") if one_step else ("",))
-            }
         seeded = [{key: by_seed(x)[s] for key, x in inputs.items()} for s in range(S)]
         ys = [
             self._targets(p, mine, features, s, one_step)
@@ -248,6 +255,26 @@ class SeedBatchFarsighter:
                     y_B = max_targets(TensorBatch.of(mine), features[""][1][s], p.target_mean_AD)
                 accumulate(cfg, p.head, p.recent_phi, phi_SBD[s].detach(), mine["actions_B"], y_B)
         return [loss.detach() for loss in losses]
+
+    def _target_features(
+        self, next_SB: torch.Tensor, end_B: np.ndarray, batch: Batch
+    ) -> torch.Tensor | list[torch.Tensor]:
+        """phi_target(s') of every seed: one batched forward, or each seed's target cache
+        (``CachedTarget``'s lookup, the misses through its own target torso alone)."""
+        if self.parts[0].cache is None:
+            return self.torso_target(next_SB)
+        B, E = self.cfg.batch_size, self.cfg.num_envs
+        out = []
+        for s, p in enumerate(self.parts):
+            rows, obs_B, cache = slice(s * B, (s + 1) * B), next_SB[s], p.cache
+            assert cache is not None  # every seed of a batch has one, or none has
+
+            def compute(i: np.ndarray, s: int = s, obs_B: torch.Tensor = obs_B) -> torch.Tensor:
+                return self.torso_target.member_forward(obs_B[torch.from_numpy(i)], s)
+
+            # its own streams, numbered as alone
+            out.append(cache.lookup(batch.env_index[rows] - s * E, end_B[rows], compute))
+        return out
 
     def _targets(
         self, p: _Seed, mine: Tensors, features: Features, s: int, one_step: bool

@@ -179,7 +179,9 @@ class FarsighterSeedMember(Member):
             "replay": b.replay.member_state(s) if include_replay else None,
             "exploration": p.exploration.state_dict(),
             "recent_phi": p.recent_phi.state_dict(),
-            "target_cache": None,
+            "target_cache": p.cache.state_dict()
+            if p.cache is not None and include_replay
+            else None,
         }
 
     def load_state_dict(self, state: dict[str, Any]) -> None:
@@ -198,6 +200,8 @@ class FarsighterSeedMember(Member):
             setattr(p.counters, key, value)
         p.recent_phi.load_state_dict(state["recent_phi"])
         p.exploration.load_state_dict(state.get("exploration", state))
+        if p.cache is not None:  # the rows it keeps, when the checkpoint has them
+            p.cache.load_state_dict(state.get("target_cache"))
         if state.get("replay") is not None:
             b.replay.load_member(s, state["replay"])
         else:
