@@ -317,7 +317,7 @@ def test_seed_replay_samples_each_seed_as_its_replay_alone() -> None:
 
 
 def test_a_study_batches_the_seeds_of_ddqn_and_its_runs_are_those_alone(
-    tmp_path: Path, monkeypatch: pytest.MonkeyPatch
+    tmp_path: Path, capsys: pytest.CaptureFixture[str]
 ) -> None:
     """The maze study (its probe callback included) trains the two seeds of DDQN, BDQN (refits
     from the replay) and Farsighter (the target cache of its recent window) as one batch each and
@@ -341,9 +341,14 @@ def test_a_study_batches_the_seeds_of_ddqn_and_its_runs_are_those_alone(
     spread = runner.settings_from(maze.STUDY, runner.parse(maze.STUDY, three))
     split = runner.seed_batches(maze.STUDY, spread, tmp_path / "x", maze.STUDY.grid(spread))
     assert [[j.seed for j in g] for g in split] == [[1, 2], [3]]
+    alone = runner.seed_batches(maze.STUDY, spread, tmp_path / "x", maze.STUDY.grid(spread), 1)
+    assert [[j.seed for j in g] for g in alone] == [[1], [2], [3]]
+    assert main(["maze", *args, "--seeds-per-batch", "0", "--out", str(tmp_path / "no")]) == 2
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1 and "--seeds-per-batch must be >= 1" in err[0], err
+    assert not (tmp_path / "no").exists()
     assert main(["maze", *args, "--out", str(tmp_path / "batched")]) == 0
-    monkeypatch.setattr(runner, "SEEDS_PER_BATCH", 1)
-    assert main(["maze", *args, "--out", str(tmp_path / "alone")]) == 0
+    assert main(["maze", *args, "--seeds-per-batch", "1", "--out", str(tmp_path / "alone")]) == 0
     for run in ("ddqn__s1", "bdqn__s1", "bdqn__s2", "farsighter-k-10__s1", "farsighter-k-10__s2"):
         a, b = tmp_path / "alone" / "runs" / run, tmp_path / "batched" / "runs" / run
         assert (a / "probe.csv").read_text() == (b / "probe.csv").read_text(), run

@@ -134,6 +134,9 @@ class StudyArgs:
     """Environment steps of each run."""
     workers: Annotated[int, tyro.conf.arg(metavar="N")] = 0
     """Worker processes (0: one per core; 1: the runs go one after another in this process)."""
+    seeds_per_batch: Annotated[int, tyro.conf.arg(metavar="N")] = 16
+    """Most seeds of one agent and task trained as one batch in one worker, where the agent has a
+    seed-batched form (1: every run on its own; each run's numbers are the same either way)."""
     agents: Annotated[tuple[str, ...] | None, _flag("LABEL [LABEL ...]", _STUDY_DEFAULT)] = None
     """Agents by label (listed above), or 'all'."""
     plot_only: Annotated[str | None, _flag("DIR", "")] = None
@@ -224,6 +227,10 @@ def main(study: Study, argv: Sequence[str]) -> int:
         return redraw(study, Path(args.plot_only))
     settings = settings_from(study, args)
     check(study, settings)
+    if args.seeds_per_batch < 1:
+        raise ConfigError(
+            f"--seeds-per-batch must be >= 1 (1: every run on its own; got {args.seeds_per_batch})"
+        )
     backend = backend_of(args, settings.workers)
     out = out_dir(study, settings, args)
     if backend.address is not None:
@@ -231,7 +238,7 @@ def main(study: Study, argv: Sequence[str]) -> int:
     if args.overwrite and out.exists():
         shutil.rmtree(out)
     t0 = time.perf_counter()
-    run_study(study, settings, out, args.progress, backend)
+    run_study(study, settings, out, args.progress, backend, args.seeds_per_batch)
     print(f"{study.kind} study done in {time.perf_counter() - t0:.0f} s")
     print(f"report: {out / 'report.md'}")
     print(f"figures: {out / 'figures'}")
@@ -349,12 +356,13 @@ def run_study(
     out: Path,
     show_progress: bool = True,
     backend: Backend | None = None,
+    seeds_per_batch: int | None = None,
 ) -> Path:
     """Run (or resume) every agent x seed (x task) on ``backend`` (default: ``settings.workers``
     local processes), then write the study's outputs."""
     todo = _prepare(study, settings, out)
     if todo:
-        groups = seed_batches(study, settings, out, todo)
+        groups = seed_batches(study, settings, out, todo, seeds_per_batch)
         execute(
             _run_jobs,
             [(study, settings, tuple(g), str(out), str(g[0].run_dir(out))) for g in groups],
@@ -409,17 +417,20 @@ SEEDS_PER_BATCH = 16
 """Most seeds of one agent and task that a study trains as one batch."""
 
 
-def seed_batches(study: Study, settings: Any, out: Path, jobs: Sequence[Job]) -> list[list[Job]]:
+def seed_batches(
+    study: Study, settings: Any, out: Path, jobs: Sequence[Job], most: int | None = None
+) -> list[list[Job]]:
     """The jobs as the worker processes take them: the seeds of one agent and task together
     where the agent trains seeds as one batch (:func:`farsighter.seeds.batchable`), every other
-    job alone; in the order of ``jobs``. A batch holds at most :data:`SEEDS_PER_BATCH` seeds, and
+    job alone; in the order of ``jobs``. A batch holds at most ``most`` seeds
+    (:data:`SEEDS_PER_BATCH` unless given: ``--seeds-per-batch``), and
     no more than an even share of the jobs per worker (``settings.workers``), so that a study of
     one agent's five seeds on two workers runs as batches of three and two rather than leaving a
     core idle beside one batch of five."""
     from farsighter.seeds import batchable
 
     workers = settings.workers or os.cpu_count() or 1
-    size = max(1, min(SEEDS_PER_BATCH, -(-len(jobs) // workers)))
+    size = max(1, min(most or SEEDS_PER_BATCH, -(-len(jobs) // workers)))
 
     batches: dict[tuple[str, str | None], bool] = {}
 
