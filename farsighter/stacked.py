@@ -151,7 +151,7 @@ class StackedQNetwork(nn.Module):
     ``parameters()`` order (each layer's weight, then its bias; the head last), so an optimizer
     over them holds, at each index, the state of the same parameter of every seed."""
 
-    def __init__(self, nets: Sequence[QNetwork | MLPTorso]) -> None:
+    def __init__(self, nets: Sequence[nn.Module]) -> None:
         super().__init__()
         if not nets or not all(stackable(net) for net in nets):
             raise ValueError("StackedQNetwork stacks QNetworks with fp32 MLP torsos, or the torsos")

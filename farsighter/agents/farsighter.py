@@ -28,12 +28,10 @@ from typing import Any
 import gymnasium as gym
 import numpy as np
 import torch
-from torch import nn
 
 from farsighter.agents.common import (
     RecentRows,
     batch_tensors,
-    build_seeded,
     crossed,
     load_state,
     make_replay,
@@ -50,12 +48,12 @@ from farsighter.agents.farsighter_posterior import (
     accumulate,
     make_head,
     refresh_posterior,
+    seeded_torso,
 )
 from farsighter.agents.learner import Learner, make_target_cache
 from farsighter.agents.protocol import AgentFactory
 from farsighter.config import Config
 from farsighter.exploration import ThompsonExploration
-from farsighter.networks import make_torso
 from farsighter.replay import VectorStep
 
 
@@ -75,13 +73,7 @@ class FarsighterAgent:
         self.device = device
         self.num_actions = int(act_space.n)
 
-        def build() -> tuple[nn.Module, torch.Tensor]:
-            torso = make_torso(obs_space, cfg.hidden_sizes)
-            # The posterior mean starts where a linear Q head would (no bias: Q = phi^T w_a).
-            init_AD = nn.Linear(torso.out_dim, self.num_actions, bias=False).weight.detach()
-            return torso, init_AD
-
-        torso, init_AD = build_seeded(cfg.seed, build)
+        torso, init_AD = seeded_torso(cfg, obs_space, self.num_actions)
         self.torso = torso.to(device)
         self.head = make_head(cfg, self.num_actions, self.torso.out_dim, init_AD, device)
         # Eq. 8, with the target features of sampled next states kept until the next copy

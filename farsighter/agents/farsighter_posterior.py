@@ -8,11 +8,21 @@ from __future__ import annotations
 from collections.abc import Callable
 from dataclasses import dataclass
 
+import gymnasium as gym
 import numpy as np
 import torch
+from torch import nn
 
-from farsighter.agents.common import Counters, RecentRows, TensorBatch, adapt_k, batch_tensors
+from farsighter.agents.common import (
+    Counters,
+    RecentRows,
+    TensorBatch,
+    adapt_k,
+    batch_tensors,
+    build_seeded,
+)
 from farsighter.config import Config
+from farsighter.networks import Torso, make_torso
 from farsighter.ops.blr import BLRHead, greedy_predictive_variance
 from farsighter.replay import ReplayBuffer
 
@@ -26,6 +36,19 @@ class FarsighterCounters(Counters):
     draws: int = 0  # Thompson draws made (one per environment and acting step with redraw=step)
     steps_since_draw: int = 0  # acting steps since the held draw (redraw = every, k)
     q_variance: float = float("nan")  # at the latest refresh (adaptive k's signal)
+
+
+def seeded_torso(
+    cfg: Config, obs_space: gym.spaces.Box, num_actions: int
+) -> tuple[Torso, torch.Tensor]:
+    """The torso and the posterior's initial mean of seed ``cfg.seed``: the mean starts where a
+    linear Q head would (no bias: Q = phi^T w_a)."""
+
+    def build() -> tuple[Torso, torch.Tensor]:
+        torso = make_torso(obs_space, cfg.hidden_sizes)
+        return torso, nn.Linear(torso.out_dim, num_actions, bias=False).weight.detach()
+
+    return build_seeded(cfg.seed, build)  # type: ignore[no-any-return]
 
 
 def make_head(

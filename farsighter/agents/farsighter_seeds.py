@@ -1,19 +1,13 @@
-"""Farsighter and BDQN for S seeds at once: :class:`farsighter.agents.farsighter.FarsighterAgent`'s
-math with the torsos stacked along a seed axis (:mod:`farsighter.stacked`), so that one forward
-pass gives every seed's features and one backward pass updates every seed's torso.
+"""Farsighter and BDQN for S seeds at once: ``FarsighterAgent``'s math with the torsos stacked
+along a seed axis (:mod:`farsighter.stacked`): one forward pass gives every seed's features, one
+backward pass and one optimizer step update every seed's torso.
 
-What is per seed stays per seed and is the agent alone's own code: each seed's posterior (a
-:class:`~farsighter.ops.blr.BLRHead`), its Thompson draws and redraw rule
-(:class:`~farsighter.exploration.ThompsonExploration`), its generators (replay: seed + 1, numpy:
-seed + 2, torch: seed + 3), its counters, and Eq. 8's targets and loss on its slice of the
-features (:mod:`farsighter.agents.farsighter_loss`'s functions, which the agent alone calls too).
-Its gradients, gradient clipping and optimizer steps are its own, so on CPU each seed trains bit
-for bit as ``FarsighterAgent`` trains it alone (``tests/test_seeds.py``). :meth:`member` is one
-seed seen as an agent, and its checkpoint is the one the run alone writes.
-
-Each seed keeps its own target cache too (where the run alone has one: a recent window), keyed by
-its own streams. A batch refuses (:func:`supports`) adaptive k (it moves each seed's k on its
-own); those seeds train in turn.
+The rest is per seed, and the agent alone's own code (:mod:`farsighter_loss`'s and
+:mod:`farsighter_posterior`'s functions): its posterior, Thompson draws, redraw rule, target cache
+(over its own streams), generators (replay seed + 1, numpy seed + 2, torch seed + 3) and
+counters, and Eq. 8 on its slice of the features. On CPU each seed trains bit for bit as it
+trains alone (``tests/test_seeds.py``); :meth:`member` is one seed seen as an agent, with the
+checkpoint of the run alone. Adaptive k, which moves each seed's k on its own, trains in turn.
 """
 
 from __future__ import annotations
@@ -26,10 +20,8 @@ import numpy as np
 import torch
 
 from farsighter.agents.common import (
-    RecentRows,
     TensorBatch,
     batch_tensors,
-    build_seeded,
     crossed,
     make_optimizer,
     minibatch_args,
@@ -39,26 +31,20 @@ from farsighter.agents.common import (
 )
 from farsighter.agents.cuda_graph import Tensors
 from farsighter.agents.farsighter_loss import (
-    eq8_targets,
     max_targets,
     one_step_batch,
     one_step_draws,
     one_step_inputs,
     q_taken,
-    target_draws,
 )
+from farsighter.agents.farsighter_parts import SeedParts
 from farsighter.agents.farsighter_posterior import (
-    RECENT_FEATURES,
-    FarsighterCounters,
     accumulate,
-    make_head,
     refresh_posterior,
+    seeded_torso,
 )
-from farsighter.agents.learner import make_target_cache
 from farsighter.agents.seed_members import FarsighterSeedMember, seed_replay, stack_refusal
 from farsighter.config import Config
-from farsighter.exploration import ThompsonExploration
-from farsighter.networks import make_torso
 from farsighter.replay import Batch, VectorStep
 from farsighter.stacked import (
     StackedQNetwork,
@@ -81,38 +67,6 @@ def supports(cfg: Config, obs_space: gym.Space | None, device: torch.device) -> 
     return stack_refusal(cfg, obs_space)
 
 
-class _Seed:
-    """One seed's own parts, made and seeded as ``FarsighterAgent`` makes them alone, and its
-    Eq. 8 on given features."""
-
-    def __init__(
-        self, cfg: Config, num_actions: int, dim: int, init_AD: torch.Tensor, device: torch.device
-    ) -> None:
-        self.cfg = cfg
-        self.head = make_head(cfg, num_actions, dim, init_AD, device)
-        self.target_mean_AD = self.head.mean_AD.clone()
-        self.counters = FarsighterCounters(k=cfg.k)
-        self.exploration = ThompsonExploration(cfg, self.head, self.counters)
-        self.recent_phi = RecentRows(RECENT_FEATURES)
-        self.rng = np.random.default_rng(cfg.seed + 2)
-        self.gen = torch.Generator(device=device)
-        self.gen.manual_seed(cfg.seed + 3)
-        self.cache = make_target_cache(cfg, device, dim)  # FarsighterLoss's, keyed by its streams
-
-    def draws(self, rows: int, one_step: bool) -> Tensors:
-        """The targets' draws (``FarsighterAgent._draws``), from this seed's generator."""
-        acting = partial(self.exploration.acting_draw, self.gen)
-        return target_draws(self.cfg.blr.target, self.head, rows, one_step, self.gen, acting)
-
-    @torch.no_grad()
-    def y(
-        self, t: TensorBatch, phi_next: torch.Tensor, phi_next_target: torch.Tensor, draws: Tensors
-    ) -> torch.Tensor:
-        """y of Eq. 8 under this seed's posterior and target mean."""
-        head, kind = self.head, self.cfg.blr.target
-        return eq8_targets(head, self.target_mean_AD, kind, t, phi_next, phi_next_target, draws)
-
-
 class SeedBatchFarsighter:
     """S Farsighter (or BDQN) agents of one config (``cfgs`` differ only in seed) as one
     computation."""
@@ -128,12 +82,7 @@ class SeedBatchFarsighter:
         cfg = self.cfg = cfgs[0]
         self.cfgs, self.device, self.num_actions = list(cfgs), device, int(act_space.n)
 
-        def build() -> tuple[torch.nn.Module, torch.Tensor]:  # FarsighterAgent's, draw for draw
-            torso = make_torso(obs_space, cfg.hidden_sizes)
-            init_AD = torch.nn.Linear(torso.out_dim, self.num_actions, bias=False).weight.detach()
-            return torso, init_AD
-
-        built = [build_seeded(c.seed, build) for c in cfgs]
+        built = [seeded_torso(c, obs_space, self.num_actions) for c in cfgs]  # as alone
         torsos = [torso for torso, _ in built]
         self.dim = int(torsos[0].out_dim)
         self.torso = StackedQNetwork(torsos).to(device)  # refuses torsos it cannot stack
@@ -142,7 +91,7 @@ class SeedBatchFarsighter:
         self.params = list(self.torso.parameters())
         self.opt = make_optimizer(self.params, cfg)
         self.parts = [
-            _Seed(c, self.num_actions, self.dim, init_AD, device)
+            SeedParts(c, self.num_actions, self.dim, init_AD, device)
             for c, (_, init_AD) in zip(cfgs, built, strict=True)
         ]
         for cache in (p.cache for p in self.parts if p.cache is not None):
@@ -194,12 +143,9 @@ class SeedBatchFarsighter:
                 p.counters, "refreshes", global_step, cfg.blr.posterior_every
             ):
                 self._refresh(s, p)
-        synced = [
-            crossed(p.counters, "target_syncs", global_step, cfg.target_update_every)
-            for p in self.parts
-        ]
-        if any(synced):  # the seeds step together: all of them
-            self.torso_target.load_state_dict(self.torso.state_dict())
+        every = cfg.target_update_every  # (a list: every seed's counter moves)
+        if any([crossed(p.counters, "target_syncs", global_step, every) for p in self.parts]):
+            self.torso_target.load_state_dict(self.torso.state_dict())  # the seeds step together
             for p in self.parts:
                 p.target_mean_AD.copy_(p.head.mean_AD)
         return metrics
@@ -264,20 +210,18 @@ class SeedBatchFarsighter:
         if self.parts[0].cache is None:
             return self.torso_target(next_SB)
         B, E = self.cfg.batch_size, self.cfg.num_envs
-        out = []
-        for s, p in enumerate(self.parts):
-            rows, obs_B, cache = slice(s * B, (s + 1) * B), next_SB[s], p.cache
-            assert cache is not None  # every seed of a batch has one, or none has
-
-            def compute(i: np.ndarray, s: int = s, obs_B: torch.Tensor = obs_B) -> torch.Tensor:
-                return self.torso_target.member_forward(obs_B[torch.from_numpy(i)], s)
-
-            # its own streams, numbered as alone
-            out.append(cache.lookup(batch.env_index[rows] - s * E, end_B[rows], compute))
-        return out
+        return [  # each seed's own streams, numbered as alone
+            p.target_features(
+                next_SB[s],
+                batch.env_index[s * B : (s + 1) * B] - s * E,
+                end_B[s * B : (s + 1) * B],
+                partial(self.torso_target.member_forward, s=s),
+            )
+            for s, p in enumerate(self.parts)
+        ]
 
     def _targets(
-        self, p: _Seed, mine: Tensors, features: Features, s: int, one_step: bool
+        self, p: SeedParts, mine: Tensors, features: Features, s: int, one_step: bool
     ) -> torch.Tensor:
         """Seed ``s``'s y of Eq. 8 on its features (``FarsighterLoss.__call__``'s targets)."""
         draws = p.draws(len(mine["actions_B"]), one_step)
@@ -288,7 +232,7 @@ class SeedBatchFarsighter:
         one_next, one_next_target = features["one_"]
         return torch.maximum(y_B, p.y(one, one_next[s], one_next_target[s], one_step_draws(draws)))
 
-    def _refresh(self, s: int, p: _Seed) -> None:
+    def _refresh(self, s: int, p: SeedParts) -> None:
         """Algorithm 1 line 6 for one seed (``FarsighterAgent.refresh_posterior``): a batch-mode
         fit runs the seed's own networks over its own streams' rows."""
         cfg = self.cfg

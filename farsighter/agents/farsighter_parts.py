@@ -1,0 +1,64 @@
+"""One seed of :class:`~farsighter.agents.farsighter_seeds.SeedBatchFarsighter`: what it owns
+beside its slice of the stacked torsos (its posterior, target mean, counters, Thompson draws,
+recent features, generators and target cache), made and seeded as ``FarsighterAgent`` makes its
+own, and Eq. 8 on features it is handed."""
+
+from __future__ import annotations
+
+from collections.abc import Callable
+from functools import partial
+
+import numpy as np
+import torch
+
+from farsighter.agents.common import RecentRows, TensorBatch
+from farsighter.agents.cuda_graph import Tensors
+from farsighter.agents.farsighter_loss import eq8_targets, target_draws
+from farsighter.agents.farsighter_posterior import RECENT_FEATURES, FarsighterCounters, make_head
+from farsighter.agents.learner import make_target_cache
+from farsighter.config import Config
+from farsighter.exploration import ThompsonExploration
+
+
+class SeedParts:
+    """One seed's own parts, made and seeded as ``FarsighterAgent`` makes them alone, and its
+    Eq. 8 on given features."""
+
+    def __init__(
+        self, cfg: Config, num_actions: int, dim: int, init_AD: torch.Tensor, device: torch.device
+    ) -> None:
+        self.cfg = cfg
+        self.head = make_head(cfg, num_actions, dim, init_AD, device)
+        self.target_mean_AD = self.head.mean_AD.clone()
+        self.counters = FarsighterCounters(k=cfg.k)
+        self.exploration = ThompsonExploration(cfg, self.head, self.counters)
+        self.recent_phi = RecentRows(RECENT_FEATURES)
+        self.rng = np.random.default_rng(cfg.seed + 2)
+        self.gen = torch.Generator(device=device)
+        self.gen.manual_seed(cfg.seed + 3)
+        self.cache = make_target_cache(cfg, device, dim)  # FarsighterLoss's, keyed by its streams
+
+    def draws(self, rows: int, one_step: bool) -> Tensors:
+        """The targets' draws (``FarsighterAgent._draws``), from this seed's generator."""
+        acting = partial(self.exploration.acting_draw, self.gen)
+        return target_draws(self.cfg.blr.target, self.head, rows, one_step, self.gen, acting)
+
+    def target_features(
+        self,
+        obs_B: torch.Tensor,
+        e_B: np.ndarray,
+        end_B: np.ndarray,
+        forward: Callable[[torch.Tensor], torch.Tensor],
+    ) -> torch.Tensor:
+        """phi_target(s') from this seed's cache (``CachedTarget``'s lookup), its misses
+        through ``forward``, its own target torso alone."""
+        assert self.cache is not None
+        return self.cache.lookup(e_B, end_B, lambda i: forward(obs_B[torch.from_numpy(i)]))
+
+    @torch.no_grad()
+    def y(
+        self, t: TensorBatch, phi_next: torch.Tensor, phi_next_target: torch.Tensor, draws: Tensors
+    ) -> torch.Tensor:
+        """y of Eq. 8 under this seed's posterior and target mean."""
+        head, kind = self.head, self.cfg.blr.target
+        return eq8_targets(head, self.target_mean_AD, kind, t, phi_next, phi_next_target, draws)
