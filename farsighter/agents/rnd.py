@@ -66,19 +66,7 @@ class RNDAgent:
         # DDQN's loss on the returns with the bonus added (module docstring)
         self.loss = DoubleQLoss(self.q, cfg.loss)
         self.learner = Learner(self.loss, self.q.parameters(), cfg, device)
-        # RND paper: the predictor is the target's architecture with two more layers.
-        shape, r = tuple(obs_space.shape or ()), cfg.rnd
-        self.bonus = RNDBonus(
-            cfg,
-            build_seeded(
-                cfg.seed + 4, lambda: RNDNetwork(obs_space, cfg.hidden_sizes, r.feature_dim, 0)
-            ).to(device),
-            build_seeded(
-                cfg.seed + 5, lambda: RNDNetwork(obs_space, cfg.hidden_sizes, r.feature_dim, 2)
-            ).to(device),
-            shape,
-            device,
-        )
+        self.bonus = make_bonus(cfg, obs_space, device)
         self.replay = make_replay(cfg, obs_space, frame_stack, seed=cfg.seed + 1, device=device)
         self.rng = np.random.default_rng(cfg.seed + 2)
         self.explore = EpsilonGreedy(cfg, self.num_actions, self.rng)
@@ -162,6 +150,24 @@ class RNDAgent:
 
     def load_state_dict(self, state: dict[str, Any]) -> None:
         load_state(self, self.SAVED, state)
+
+
+def make_bonus(cfg: Config, obs_space: gym.spaces.Box, device: torch.device) -> RNDBonus:
+    """Seed ``cfg.seed``'s RND bonus: a fixed random target network (seeded seed + 4) and its
+    predictor (seed + 5), which the RND paper gives the target's architecture with two more
+    layers."""
+    r = cfg.rnd
+    return RNDBonus(
+        cfg,
+        build_seeded(
+            cfg.seed + 4, lambda: RNDNetwork(obs_space, cfg.hidden_sizes, r.feature_dim, 0)
+        ).to(device),
+        build_seeded(
+            cfg.seed + 5, lambda: RNDNetwork(obs_space, cfg.hidden_sizes, r.feature_dim, 2)
+        ).to(device),
+        tuple(obs_space.shape or ()),
+        device,
+    )
 
 
 AGENT: AgentFactory = RNDAgent  # the class farsighter.algorithms names; mypy checks the protocol

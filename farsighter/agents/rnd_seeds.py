@@ -19,12 +19,11 @@ from collections.abc import Sequence
 import gymnasium as gym
 import torch
 
-from farsighter.agents.common import TensorBatch, build_seeded
+from farsighter.agents.common import TensorBatch
 from farsighter.agents.ddqn_seeds import SeedBatchDDQN, supports
+from farsighter.agents.rnd import make_bonus
 from farsighter.agents.seed_members import RNDSeedMember
 from farsighter.config import Config
-from farsighter.exploration.rnd import RNDBonus
-from farsighter.networks import RNDNetwork
 from farsighter.replay import Batch, VectorStep
 
 ALGOS = ("rnd", "krnd")
@@ -45,23 +44,7 @@ class SeedBatchRND(SeedBatchDDQN):
         device: torch.device,
     ) -> None:
         super().__init__(cfgs, obs_space, act_space, device=device)
-        shape = tuple(obs_space.shape or ())
-
-        def bonus(c: Config) -> RNDBonus:  # RNDAgent's, network for network
-            r = c.rnd
-            return RNDBonus(
-                c,
-                build_seeded(
-                    c.seed + 4, lambda: RNDNetwork(obs_space, c.hidden_sizes, r.feature_dim, 0)
-                ).to(device),
-                build_seeded(
-                    c.seed + 5, lambda: RNDNetwork(obs_space, c.hidden_sizes, r.feature_dim, 2)
-                ).to(device),
-                shape,
-                device,
-            )
-
-        self.bonuses = [bonus(c) for c in cfgs]
+        self.bonuses = [make_bonus(c, obs_space, device) for c in cfgs]  # as RNDAgent's
 
     def observe(self, steps: Sequence[VectorStep]) -> None:
         super().observe(steps)
