@@ -53,7 +53,9 @@ class SeedParts:
         """phi_target(s') from this seed's cache (``CachedTarget``'s lookup), its misses
         through ``forward``, its own target torso alone."""
         assert self.cache is not None
-        return self.cache.lookup(e_B, end_B, lambda i: forward(obs_B[torch.from_numpy(i)]))
+        return self.cache.lookup(
+            e_B, end_B, lambda i: forward(obs_B[torch.from_numpy(i).to(obs_B.device)])
+        )
 
     @torch.no_grad()
     def y(
