@@ -4,7 +4,8 @@
 seed-batched form (:data:`BATCHED`: DDQN and k-DDQN, Farsighter and BDQN, RND and k-RND) they
 train together: one forward pass acts for every seed, one backward pass updates them all, and
 the loop below steps each seed's own environments, replay and run log in turn. Elsewhere the
-seeds train one after another through :func:`farsighter.train.train`. Either way each seed is an ordinary run:
+seeds train one after another through :func:`farsighter.train.train`. Either way each seed is
+an ordinary run:
 
 * its own run directory (``runs/<env>__<algo>__s<seed>``, or ``RUN_DIR/s<seed>`` under a given
   ``--run-dir``), with the files, checkpoints and summary a run alone writes;

@@ -168,11 +168,11 @@ class StackedQNetwork(nn.Module):
         self._params = list(self.weights)  # a move may replace the tensors
         return self
 
-    def forward(self, obs_SB: torch.Tensor, members: slice = slice(None)) -> torch.Tensor:
-        """Q (S, B, A) (features (S, B, D) of torsos) of each seed on its own rows; ``members``
-        picks some seeds' networks (``obs_SB`` then holds their rows only)."""
+    def forward(self, obs_SB: torch.Tensor) -> torch.Tensor:
+        """Q (S, B, A) (features (S, B, D) of torsos) of each seed on its own rows (one seed's
+        network alone: :meth:`member_forward`)."""
         x = obs_SB.float().flatten(2)
-        params = self._params if members == slice(None) else [p[members] for p in self._params]
+        params = self._params
         layers = [(params[i], params[i + 1]) for i in range(0, len(params), 2)]
         relu = torch.relu if torch.is_grad_enabled() else torch.relu_  # in place: stays aligned
         for weight, bias in layers[:-1]:  # the torso: ReLU after each layer

@@ -46,10 +46,7 @@ ALGOS = ("ddqn", "kddqn")
 
 def supports(cfg: Config, obs_space: gym.Space | None, device: torch.device) -> str:
     """Why ``cfg`` cannot train as a seed batch here ('' when it can)."""
-    refusal = stack_refusal(cfg, obs_space)
-    if refusal:
-        return refusal
-    return ""
+    return stack_refusal(cfg, obs_space)
 
 
 class SeedBatchDDQN:

@@ -46,15 +46,11 @@ from farsighter.agents.farsighter_posterior import (
 from farsighter.agents.seed_members import FarsighterSeedMember, seed_replay, stack_refusal
 from farsighter.config import Config
 from farsighter.replay import Batch, VectorStep
-from farsighter.stacked import (
-    StackedQNetwork,
-    clip_per_seed,
-)
+from farsighter.stacked import StackedQNetwork, clip_per_seed
 
 Features = dict[str, tuple[torch.Tensor, torch.Tensor | list[torch.Tensor]]]
 """phi(s') and phi_target(s') of every seed, (S, B, D) each (phi_target a list of S from the
-target caches), of the k-step windows ('') and the
-one-step windows ('one_') of ``k_target max``."""
+target caches), of the k-step windows ('') and the one-step windows ('one_') of k_target max."""
 
 ALGOS = ("farsighter", "bdqn")
 """The Bayesian algorithms with a seed-batched form."""
@@ -224,11 +220,11 @@ class SeedBatchFarsighter:
         self, p: SeedParts, mine: Tensors, features: Features, s: int, one_step: bool
     ) -> torch.Tensor:
         """Seed ``s``'s y of Eq. 8 on its features (``FarsighterLoss.__call__``'s targets)."""
-        draws = p.draws(len(mine["actions_B"]), one_step)
-        y_B = p.y(TensorBatch.of(mine), features[""][0][s], features[""][1][s], draws)
+        t, draws = TensorBatch.of(mine), p.draws(len(mine["actions_B"]), one_step)
+        y_B = p.y(t, features[""][0][s], features[""][1][s], draws)
         if not one_step:
             return y_B
-        one = one_step_batch(TensorBatch.of(mine), mine)
+        one = one_step_batch(t, mine)
         one_next, one_next_target = features["one_"]
         return torch.maximum(y_B, p.y(one, one_next[s], one_next_target[s], one_step_draws(draws)))
 

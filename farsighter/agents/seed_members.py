@@ -90,8 +90,7 @@ class SeedMember(Member):
     def q_mean(self, obs_B: np.ndarray) -> torch.Tensor:
         """Q(s, .) of this seed's network, (B, A)."""
         b = self.batch
-        obs = torch.as_tensor(np.asarray(obs_B)).to(b.device).unsqueeze(0)
-        return b.q(obs, slice(self.s, self.s + 1))[0]
+        return b.q.member_forward(obs_tensor(np.asarray(obs_B), b.device), self.s)
 
     @torch.no_grad()
     def q_estimate(self, obs_B: np.ndarray) -> tuple[np.ndarray, np.ndarray | None]:

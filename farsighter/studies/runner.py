@@ -120,6 +120,10 @@ def nanmean(x: Sequence[float] | np.ndarray) -> float:
     return float(np.nanmean(x)) if np.isfinite(x).any() else float("nan")
 
 
+SEEDS_PER_BATCH = 16
+"""Most seeds of one agent and task that a study trains as one batch (``--seeds-per-batch``)."""
+
+
 @dataclass(frozen=True)
 class StudyArgs:
     """The flags every study command shares (a study may add its own in a subclass)."""
@@ -134,7 +138,7 @@ class StudyArgs:
     """Environment steps of each run."""
     workers: Annotated[int, tyro.conf.arg(metavar="N")] = 0
     """Worker processes (0: one per core; 1: the runs go one after another in this process)."""
-    seeds_per_batch: Annotated[int, tyro.conf.arg(metavar="N")] = 16
+    seeds_per_batch: Annotated[int, tyro.conf.arg(metavar="N")] = SEEDS_PER_BATCH
     """Most seeds of one agent and task trained as one batch in one worker, where the agent has a
     seed-batched form (1: every run on its own; each run's numbers are the same either way)."""
     agents: Annotated[tuple[str, ...] | None, _flag("LABEL [LABEL ...]", _STUDY_DEFAULT)] = None
@@ -356,7 +360,7 @@ def run_study(
     out: Path,
     show_progress: bool = True,
     backend: Backend | None = None,
-    seeds_per_batch: int | None = None,
+    seeds_per_batch: int = SEEDS_PER_BATCH,
 ) -> Path:
     """Run (or resume) every agent x seed (x task) on ``backend`` (default: ``settings.workers``
     local processes), then write the study's outputs."""
@@ -413,24 +417,20 @@ def _finished(study: Study, run_dir: Path) -> bool:
     return all((run_dir / name).exists() for name in study.finished)
 
 
-SEEDS_PER_BATCH = 16
-"""Most seeds of one agent and task that a study trains as one batch."""
-
-
 def seed_batches(
-    study: Study, settings: Any, out: Path, jobs: Sequence[Job], most: int | None = None
+    study: Study, settings: Any, out: Path, jobs: Sequence[Job], most: int = SEEDS_PER_BATCH
 ) -> list[list[Job]]:
     """The jobs as the worker processes take them: the seeds of one agent and task together
     where the agent trains seeds as one batch (:func:`farsighter.seeds.batchable`), every other
     job alone; in the order of ``jobs``. A batch holds at most ``most`` seeds
-    (:data:`SEEDS_PER_BATCH` unless given: ``--seeds-per-batch``), and
-    no more than an even share of the jobs per worker (``settings.workers``), so that a study of
+    (``--seeds-per-batch``) and no more than an even share of the jobs per worker
+    (``settings.workers``), so that a study of
     one agent's five seeds on two workers runs as batches of three and two rather than leaving a
     core idle beside one batch of five."""
     from farsighter.seeds import batchable
 
     workers = settings.workers or os.cpu_count() or 1
-    size = max(1, min(most or SEEDS_PER_BATCH, -(-len(jobs) // workers)))
+    size = max(1, min(most, -(-len(jobs) // workers)))
 
     batches: dict[tuple[str, str | None], bool] = {}
 
