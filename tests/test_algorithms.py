@@ -146,7 +146,9 @@ def test_presets_with_algo_prints_the_resolved_values_and_their_source(
     assert "resolves to general" in out
     lines = {line.split("=")[0].strip(): line for line in out.splitlines() if "=" in line}
     assert "'max'" in lines["k_target"] and "(preset general, for farsighter)" in lines["k_target"]
-    assert "'step'" in lines["blr.redraw"] and "(algorithm farsighter)" in lines["blr.redraw"]
+    assert (
+        "'k'" in lines["blr.redraw"] and "(preset general, for farsighter)" in lines["blr.redraw"]
+    )
     assert "eval_max_steps" not in lines  # left at its default: only with --all
     assert main(["presets", "--algo", "bdqn", "--preset", "bdqn", "--all"]) == 0
     out = capsys.readouterr().out

@@ -190,6 +190,24 @@ def test_each_redraw_mode_draws_exactly_when_it_says(
     assert drawn_at == expected_draw_steps
 
 
+def test_the_default_draw_is_held_for_k_steps_across_episode_ends(tmp_path: Path) -> None:
+    """What `auto` gives Farsighter on a small task (the general preset, no redraw flag): one
+    draw acts for k steps, whatever the episodes do, and the held weights are the ones acted
+    under (a draw per step would dither: docs/design.md "When to draw")."""
+    agent = make_agent(tmp_path, k=4, preset="auto")
+    assert agent.cfg.preset == "general" and agent.cfg.blr.redraw == "k"
+    draws = _act_and_end(agent, 20, episode_ends={3, 11})
+    drawn_at = [t for t in range(20) if draws[t] > (draws[t - 1] if t else 0)]
+    assert drawn_at == [0, 4, 8, 12, 16]
+    obs = np.random.default_rng(0).normal(size=(1, 4)).astype(np.float32)
+    phi = agent.torso(torch.as_tensor(obs))
+    agent.exploration.q(phi, obs, agent.gen)  # step 20: a new hold begins
+    held = agent.exploration.w_EAD.clone()
+    q = agent.exploration.q(phi, obs, agent.gen)  # step 21, under the same draw
+    assert torch.equal(agent.exploration.w_EAD, held)
+    assert torch.allclose(q, phi @ held[0].T)
+
+
 def test_revisit_holds_the_draw_until_the_episode_returns_to_a_state(tmp_path: Path) -> None:
     """Positions 0 1 2 0 3 4 | 4 1 4 (the episode ends after the sixth step): a draw at the start,
     at the return to 0, at the new episode, and at the return to 4 in it; 1 is new in the second
@@ -379,7 +397,7 @@ def test_auto_gives_discrete_tasks_the_general_preset_and_keeps_table_1_selectab
         100,
         "residual",
     )
-    assert (cfg.blr.target, cfg.blr.redraw, cfg.k_target, cfg.k) == ("sample", "step", "max", 10)
+    assert (cfg.blr.target, cfg.blr.redraw, cfg.k_target, cfg.k) == ("sample", "k", "max", 10)
     cartpole = make_config("farsighter", "CartPole-v1", preset="cartpole")  # as measured
     assert (cartpole.blr.redraw, cartpole.k_target) == ("episode", "max")
     bdqn = make_config("bdqn", "CartPole-v1")

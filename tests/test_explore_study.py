@@ -194,7 +194,8 @@ def test_agents_are_one_config_each_on_the_auto_preset(tmp_path: Path) -> None:
     ]
     by = {a.label: a for a in AGENTS}
     # the default list trains no config twice
-    assert "Farsighter (redraw step)" not in StudyConfig().agents
+    assert "Farsighter (redraw k)" not in StudyConfig().agents
+    assert "Farsighter (redraw step)" in StudyConfig().agents
     configs = [
         run_config(by[label], QUICK, 3, tmp_path, (chain_id(10), 10_000))
         for label in StudyConfig().agents

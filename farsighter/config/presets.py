@@ -82,22 +82,27 @@ _SMALL_TASK_LEARNER: dict[str, Any] = {
 }
 # Over the algorithms' own values: BDQN holds one draw per episode (its own default is the BDQN
 # paper's every T = 1,000 steps), and Farsighter's k-step target is no lower than the one-step
-# target. Farsighter keeps Algorithm 2's draw at every step: on the chain it solved as often as a
-# draw held per episode (5/5 seeds at every length, docs/results/explore), and on MiniGrid
-# DoorKey-5x5 a draw held per episode never reached the goal in 1,200 episodes (3 seeds x 100k
-# steps; a fixed greedy policy walks in circles until the time limit) where a draw per step
-# reached it in 10 episodes (median) (docs/results/explore/doorkey/report.md).
+# target.
 _FRESH_PER_ALGO: dict[str, dict[str, Any]] = {
     "bdqn": {"blr.redraw": "episode"},
     "farsighter": {"k_target": "max"},
 }
-# The general preset's: Farsighter's minibatches from the whole replay too. Algorithm 1 line 4's
-# latest-N window (500 transitions with this learner: 50 episodes of deep sea N = 10) forgets a
-# rarely found reward within a few dozen episodes; on deep sea N = 14 the whole replay held the
-# greedy solution in 1 of 2 seeds, the window in 0 of 2 (docs/design.md).
+# The general preset's, for Farsighter: minibatches from the whole replay, and a draw held for
+# the k steps of its target.
+# - Algorithm 1 line 4's latest-N window (500 transitions with this learner: 50 episodes of deep
+#   sea N = 10) forgets a rarely found reward within a few dozen episodes; on deep sea N = 14 the
+#   whole replay held the greedy solution in 1 of 2 seeds, the window in 0 of 2 (docs/design.md).
+# - A draw per step (Algorithm 2) dithers: on MountainCar-v0 its independent draws chose among
+#   actions whose posterior-mean gaps (0.03 on average) were below the draws' spread (0.03 to
+#   0.06), and no training episode reached the flag in 5 of 5 seeds x 75k steps. Held for k = 10
+#   steps the draw commits long enough to swing: 2 of 3 seeds solved it in 100k steps. A draw
+#   held per episode circles in MiniGrid until the time limit; held for k it is replaced every k
+#   steps.
+#   On deep sea (N = 10, 14), the 30-state chain, Acrobot and CartPole it did as well as a draw
+#   per step (docs/design.md "When to draw", docs/results/explore/redraw-k).
 _GENERAL_PER_ALGO: dict[str, dict[str, Any]] = {
     **_FRESH_PER_ALGO,
-    "farsighter": {**_FRESH_PER_ALGO["farsighter"], "sample_recent": False},
+    "farsighter": {**_FRESH_PER_ALGO["farsighter"], "sample_recent": False, "blr.redraw": "k"},
 }
 # The cartpole preset's learning checks (tests/test_learning_slow.py) were measured with a draw
 # held per episode; kept so that they stay what was measured.
@@ -120,8 +125,9 @@ PRESETS: dict[str, Preset] = {
             "What `auto` gives a discrete task that is not Atari: a learner for small tasks "
             "(Adam 1e-3, an update every 4 steps on 64 transitions from the whole replay, a "
             "target copy every 500 steps, 128 x 128) for every agent, with a posterior that "
-            "stays fresh and scaled and whose uncertainty propagates, so that Thompson "
-            "exploration works on tasks nobody tuned it for (docs/results/explore). Reproduce "
+            "stays fresh and scaled and whose uncertainty propagates, and (Farsighter) a draw "
+            "held for the k steps of its target, so that Thompson exploration works on tasks "
+            "nobody tuned it for (docs/results/explore). Reproduce "
             "the paper with --preset control or atari.",
             "Farsighter paper Table 1 (control column) for gamma and the BLR values; the "
             "learner and the posterior settings are ours, chosen on the exploration suite "

@@ -294,7 +294,8 @@ AGENTS: tuple[Agent, ...] = (
     Agent("DDQN", "ddqn"),
     Agent("k-DDQN", "kddqn"),
     Agent("BDQN", "bdqn"),
-    # the library's default: a draw per step (Algorithm 2) since the DoorKey runs; per episode when
+    # the library's default: a draw held for k steps since docs/results/explore/redraw-k; a draw
+    # per step (Algorithm 2) before it, back to the DoorKey runs; per episode when
     # docs/results/explore/report.md (the chain) was made, so there "Farsighter" is per episode
     Agent("Farsighter", "farsighter"),
     Agent("Farsighter (redraw step)", "farsighter", {"blr.redraw": "step"}),
@@ -309,10 +310,10 @@ AGENTS: tuple[Agent, ...] = (
     Agent("RND", "rnd"),
 )
 COLORS = {a.label: f"C{i}" for i, a in enumerate(AGENTS)}
-DEFAULT_AGENTS = tuple(a.label for a in AGENTS if a.label != "Farsighter (redraw step)")
-"""The default list: every agent once. "Farsighter (redraw step)" builds the same config as
-"Farsighter" now that a draw per step is the default, so it is left out unless named (the saved
-studies in docs/results name it)."""
+DEFAULT_AGENTS = tuple(a.label for a in AGENTS if a.label != "Farsighter (redraw k)")
+"""The default list: every agent once. "Farsighter (redraw k)" builds the same config as
+"Farsighter" now that a draw held for k steps is the default, so it is left out unless named (the
+saved studies in docs/results name it)."""
 
 
 @dataclass(frozen=True)
