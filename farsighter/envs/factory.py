@@ -1,6 +1,7 @@
 """One environment factory for every agent: any Gymnasium id, Atari preprocessing for ALE ids,
 MinAtar's planes channels-first, goal-conditioned (dict-observation) robotics tasks flattened to
-vectors."""
+vectors, and any other observation space Gymnasium can flatten (Discrete as a one-hot vector,
+MultiDiscrete, MultiBinary, Tuple, Dict, Box grids) made a float32 vector."""
 
 from __future__ import annotations
 
@@ -132,6 +133,8 @@ def make_env(
             env = MinAtarChannelsFirst(env)
         if is_goal_space(env.observation_space):
             env = FlattenGoalObservation(env, include_achieved=cfg.naf.her)
+        elif flattenable(env.observation_space):
+            env = flat_observations(env)
         env = gym.wrappers.RecordEpisodeStatistics(env)
     env.action_space.seed(seed)
     env.observation_space.seed(seed)
@@ -211,6 +214,38 @@ def _use_envpool(cfg: Config) -> bool:
 
         return envpool_supports(cfg.env, cfg.atari.noop_max)
     return cfg.atari.backend == "envpool"
+
+
+# Spaces that are neither a flat vector nor an image but that the MLP torso can take flattened.
+FLATTENED = (
+    gym.spaces.Discrete,
+    gym.spaces.MultiDiscrete,
+    gym.spaces.MultiBinary,
+    gym.spaces.Tuple,
+    gym.spaces.Dict,
+)
+
+
+def flattenable(space: gym.Space) -> bool:
+    """An observation space the torso takes once flattened by :func:`flat_observations`: a
+    discrete space (FrozenLake, Taxi, CliffWalking: the state index), a tuple or dict of spaces
+    (Blackjack), or a Box that is neither a flat vector (D,) nor an image (C, H, W)."""
+    if isinstance(space, gym.spaces.Box):
+        return space.shape is not None and len(space.shape) not in (1, 3)
+    if not isinstance(space, FLATTENED):
+        return False
+    try:  # a Sequence or Graph part has no fixed-size vector: flattened, it is no Box
+        return isinstance(gym.spaces.flatten_space(space), gym.spaces.Box)
+    except (NotImplementedError, TypeError, ValueError):
+        return False
+
+
+def flat_observations(env: gym.Env) -> gym.Env:
+    """Observations as float32 vectors through Gymnasium's own flattening
+    (``gymnasium.spaces.flatten``): a Discrete(n) state i becomes the one-hot vector e_i of
+    length n (so a tabular task gets a tabular network input), a MultiDiscrete one one-hot block
+    per part, tuples and dicts their parts' vectors concatenated, a Box grid its cells in order."""
+    return gym.wrappers.DtypeObservation(gym.wrappers.FlattenObservation(env), np.float32)
 
 
 class MiniGridImage(gym.ObservationWrapper):
@@ -335,7 +370,8 @@ def check_spaces(algo: str, obs_space: gym.Space, act_space: gym.Space) -> None:
     if not isinstance(obs_space, gym.spaces.Box):
         raise EnvError(
             f"observation space {obs_space} is not supported; accepted: Box observations (flat "
-            "vectors or images)"
+            "vectors or images) and spaces Gymnasium flattens to vectors (Discrete, MultiDiscrete, "
+            "MultiBinary, and Tuple or Dict of them)"
         )
     if obs_space.shape is None or len(obs_space.shape) not in (1, 3):
         raise EnvError(
