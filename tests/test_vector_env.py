@@ -5,6 +5,7 @@ observations included."""
 from __future__ import annotations
 
 import pickle
+from functools import partial
 from typing import Any
 
 import gymnasium as gym
@@ -44,14 +45,19 @@ def assert_same(a: Any, b: Any, where: str = "") -> None:
         ("CartPole-v1", 3, True),  # terminations, episode statistics
         ("Pendulum-v1", 2, True),  # continuous actions, truncation at 200 steps
         (deep_sea_id(6), 2, True),  # bsuite infos: bad_episode, is_success at the end
-        ("FrozenLake-v1", 2, False),  # Discrete observations: Gymnasium's own step
+        ("FrozenLake-v1", 2, True),  # Discrete observations, made one-hot vectors
+        ("FrozenLake-v1", 2, False),  # the same unwrapped (Discrete): Gymnasium's own step
     ],
 )
 def test_steps_are_gymnasiums(env_id: str, num_envs: int, lean: bool) -> None:
     cfg = make_config("naf" if env_id == "Pendulum-v1" else "ddqn", env_id, num_envs=num_envs)
-    ours = make_vector_env(cfg, seed=4)
+    if lean:  # the factory's environments
+        ours = make_vector_env(cfg, seed=4)
+        fns = [lambda i=i: make_env(cfg, seed=4 + i, training=True) for i in range(num_envs)]
+    else:  # a space the factory would flatten, given to the vector env as it is
+        fns = [partial(gym.make, env_id) for _ in range(num_envs)]
+        ours = LeanSyncVectorEnv(fns)
     assert isinstance(ours, LeanSyncVectorEnv) and ours._lean == lean
-    fns = [lambda i=i: make_env(cfg, seed=4 + i, training=True) for i in range(num_envs)]
     theirs = gym.vector.SyncVectorEnv(fns, autoreset_mode=gym.vector.AutoresetMode.SAME_STEP)
     assert_same(ours.reset(seed=4), theirs.reset(seed=4), "reset")
     ours.action_space.seed(0)

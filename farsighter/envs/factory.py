@@ -134,7 +134,7 @@ def make_env(
         if is_goal_space(env.observation_space):
             env = FlattenGoalObservation(env, include_achieved=cfg.naf.her)
         elif flattenable(env.observation_space):
-            env = flat_observations(env)
+            env = FlatObservation(env)
         env = gym.wrappers.RecordEpisodeStatistics(env)
     env.action_space.seed(seed)
     env.observation_space.seed(seed)
@@ -227,7 +227,7 @@ FLATTENED = (
 
 
 def flattenable(space: gym.Space) -> bool:
-    """An observation space the torso takes once flattened by :func:`flat_observations`: a
+    """An observation space the torso takes once flattened by :class:`FlatObservation`: a
     discrete space (FrozenLake, Taxi, CliffWalking: the state index), a tuple or dict of spaces
     (Blackjack), or a Box that is neither a flat vector (D,) nor an image (C, H, W)."""
     if isinstance(space, gym.spaces.Box):
@@ -240,12 +240,26 @@ def flattenable(space: gym.Space) -> bool:
         return False
 
 
-def flat_observations(env: gym.Env) -> gym.Env:
+class FlatObservation(gym.ObservationWrapper):
     """Observations as float32 vectors through Gymnasium's own flattening
     (``gymnasium.spaces.flatten``): a Discrete(n) state i becomes the one-hot vector e_i of
     length n (so a tabular task gets a tabular network input), a MultiDiscrete one one-hot block
-    per part, tuples and dicts their parts' vectors concatenated, a Box grid its cells in order."""
-    return gym.wrappers.DtypeObservation(gym.wrappers.FlattenObservation(env), np.float32)
+    per part, tuples and dicts their parts' vectors concatenated, a Box grid its cells in order.
+    (Gymnasium's FlattenObservation does the same but holds a lambda, and a checkpoint pickles
+    the environments.)"""
+
+    def __init__(self, env: gym.Env) -> None:
+        super().__init__(env)
+        self.original_space = env.observation_space
+        flat = gym.spaces.flatten_space(env.observation_space)
+        assert isinstance(flat, gym.spaces.Box)  # flattenable() checked it
+        self.observation_space = gym.spaces.Box(
+            flat.low.astype(np.float32), flat.high.astype(np.float32), dtype=np.float32
+        )
+
+    def observation(self, observation: Any) -> np.ndarray:
+        flat = gym.spaces.flatten(self.original_space, observation)
+        return np.asarray(flat, dtype=np.float32)
 
 
 class MiniGridImage(gym.ObservationWrapper):
