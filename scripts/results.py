@@ -98,6 +98,33 @@ ENTRIES = (
         174,
     ),
     Entry(
+        "explore/redraw-k-classic",
+        "explore --families mountaincar acrobot --seeds 1 2 3 --steps 100000 "
+        "--agents 'Farsighter (redraw k)'",
+        "MountainCar and Acrobot, Farsighter's draw held for k steps (issue #25 item 3)",
+        606,
+    ),
+    Entry(
+        "explore/redraw-step-classic",
+        "explore --families mountaincar acrobot --seeds 1 2 3 --steps 100000 "
+        "--agents DDQN 'Farsighter (redraw step)'",
+        "the same with a draw per step, Algorithm 2 (the default before), and DDQN",
+        769,
+    ),
+    Entry(
+        "explore/redraw-k-deepsea",
+        "explore --families deepsea --sizes 10 14 --seeds 1 2 3 4 5 "
+        "--agents 'Farsighter (redraw k)'",
+        "deep sea N = 10 and 14 with the draw held for k steps; a draw per step: deepsea-bsuite",
+        260,
+    ),
+    Entry(
+        "explore/redraw-k-chain30",
+        "explore --families chain --sizes 30 --seeds 1 2 3 4 5 --agents 'Farsighter (redraw k)'",
+        "the chain of length 30 with the draw held for k steps; a draw per step: chain30",
+        124,
+    ),
+    Entry(
         "explore/doorkey",
         "explore --families doorkey --sizes 5 --seeds 1 2 3 --agents DDQN Farsighter "
         "'Farsighter (redraw revisit)'",

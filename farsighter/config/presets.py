@@ -99,7 +99,7 @@ _FRESH_PER_ALGO: dict[str, dict[str, Any]] = {
 #   held per episode circles in MiniGrid until the time limit; held for k it is replaced every k
 #   steps.
 #   On deep sea (N = 10, 14), the 30-state chain, Acrobot and CartPole it did as well as a draw
-#   per step (docs/design.md "When to draw", docs/results/explore/redraw-k).
+#   per step (docs/design.md "When to draw", docs/results/explore/redraw-*).
 _GENERAL_PER_ALGO: dict[str, dict[str, Any]] = {
     **_FRESH_PER_ALGO,
     "farsighter": {**_FRESH_PER_ALGO["farsighter"], "sample_recent": False, "blr.redraw": "k"},

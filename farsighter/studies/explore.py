@@ -294,7 +294,7 @@ AGENTS: tuple[Agent, ...] = (
     Agent("DDQN", "ddqn"),
     Agent("k-DDQN", "kddqn"),
     Agent("BDQN", "bdqn"),
-    # the library's default: a draw held for k steps since docs/results/explore/redraw-k; a draw
+    # the library's default: a draw held for k steps since docs/results/explore/redraw-*; a draw
     # per step (Algorithm 2) before it, back to the DoorKey runs; per episode when
     # docs/results/explore/report.md (the chain) was made, so there "Farsighter" is per episode
     Agent("Farsighter", "farsighter"),
