@@ -52,7 +52,7 @@ def main() -> None:
 
     class Keep:  # the trained agent, read after the run
         def on_step(self, global_step: int, info: dict[str, Any], agent: Any) -> None:
-            seen["agent"] = agent
+            pass
 
         def on_finish(self, run_dir: Path, agent: Any) -> None:
             seen["agent"] = agent

@@ -172,8 +172,7 @@ class StackedQNetwork(nn.Module):
         """Q (S, B, A) (features (S, B, D) of torsos) of each seed on its own rows (one seed's
         network alone: :meth:`member_forward`)."""
         x = obs_SB.float().flatten(2)
-        params = self._params
-        layers = [(params[i], params[i + 1]) for i in range(0, len(params), 2)]
+        layers = list(zip(self._params[0::2], self._params[1::2], strict=True))
         relu = torch.relu if torch.is_grad_enabled() else torch.relu_  # in place: stays aligned
         for weight, bias in layers[:-1]:  # the torso: ReLU after each layer
             x = relu(stacked_linear(x, weight, bias))
