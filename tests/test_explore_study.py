@@ -95,7 +95,7 @@ def test_tasks_with_the_steps_cap_and_sizes() -> None:
     capped = dataclasses.replace(QUICK, steps=15_000)
     assert [n for _, n in tasks(capped)] == [10_000, 10_000, 15_000]
     full = tasks(StudyConfig())
-    assert len(full) == 5 + 3 + 3 + 3 + 1 + 1 + 9 + 4
+    assert len(full) == 5 + 3 + 3 + 3 + 1 + 1 + 2 + 9 + 4
     assert ("MountainCar-v0", 200_000) in full and ("Acrobot-v1", 100_000) in full
     assert full[-1] == (deep_sea_id(20, stochastic=True), 20 * 3_000)
     # --episodes sets deep sea runs (both families) alone; --steps still caps
@@ -189,13 +189,32 @@ def test_agents_are_one_config_each_on_the_auto_preset(tmp_path: Path) -> None:
         "Farsighter (redraw episode)",
         "Farsighter (redraw revisit)",
         "Farsighter (k-step target)",
+        "Farsighter (mean target)",
+        "Farsighter (mean, k-step target)",
         "OB2I",
         "RND",
     ]
     by = {a.label: a for a in AGENTS}
-    # the default list trains no config twice
-    assert "Farsighter (redraw k)" not in StudyConfig().agents
+    # the default list trains no config twice, and leaves out the variants run only when named
+    named_only = {
+        "Farsighter (redraw k)",
+        "Farsighter (mean target)",
+        "Farsighter (mean, k-step target)",
+    }
+    assert not named_only & set(StudyConfig().agents)
     assert "Farsighter (redraw step)" in StudyConfig().agents
+    assert len(StudyConfig().agents) == len(AGENTS) - 3
+    every = [
+        run_config(a, QUICK, 3, tmp_path, (chain_id(10), 10_000))
+        for a in AGENTS
+        if a.label != "Farsighter (redraw k)"
+    ]
+    assert len({repr(dataclasses.replace(c, run_dir="")) for c in every}) == len(every)
+    mean_k = run_config(
+        by["Farsighter (mean, k-step target)"], QUICK, 3, tmp_path, (chain_id(10), 1)
+    )
+    assert (mean_k.blr.target, mean_k.k_target) == ("mean", "k")
+    assert (every[3].blr.target, every[3].k_target) == ("sample", "max")  # the default's
     configs = [
         run_config(by[label], QUICK, 3, tmp_path, (chain_id(10), 10_000))
         for label in StudyConfig().agents
@@ -224,6 +243,44 @@ def test_agents_are_one_config_each_on_the_auto_preset(tmp_path: Path) -> None:
     )
     door = run_config(by["DDQN"], QUICK, 1, tmp_path, ("MiniGrid-DoorKey-8x8-v0", 1_000_000))
     assert (door.eval_every, door.eval_episodes, door.total_steps) == (10_000, 10, 1_000_000)
+
+
+def test_frozen_lake_family_asks_for_half_of_the_best_success_rate() -> None:
+    lake = FAMILIES["frozenlake"]
+    assert (lake.sizes, lake.env_ids, lake.budgets) == (
+        (4, 8),
+        ("FrozenLake-v1", "FrozenLake8x8-v1"),
+        (50_000, 200_000),
+    )
+    assert (lake.threshold, lake.goal, lake.eval_episodes, lake.measured_by) == (
+        0.5,
+        0.0,
+        20,
+        "return",
+    )
+    for env_id, best in (("FrozenLake-v1", 0.744), ("FrozenLake8x8-v1", 0.913)):
+        # the best success probability within the time limit, by value iteration on the
+        # environment's own transition table: the figure the family's text states
+        spec = gym.spec(env_id)
+        table: Any = gym.make(env_id).unwrapped.P  # type: ignore[attr-defined]
+        value = np.zeros(len(table))
+        for _ in range(int(spec.max_episode_steps or 0)):
+            value = np.array(
+                [
+                    max(
+                        sum(p * (r + (0.0 if done else value[s2])) for p, s2, r, done in outcomes)
+                        for outcomes in table[s].values()
+                    )
+                    for s in range(len(table))
+                ]
+            )
+        assert round(float(value[0]), 3) == best
+        assert f"{best}" in lake.solved and best > lake.threshold
+    # the observation reaches the agent as a one-hot vector of the lake's cells
+    env = make_env(make_config("ddqn", "FrozenLake-v1"), seed=0)
+    obs, _ = env.reset(seed=0)
+    assert obs.shape == (16,) and obs.sum() == 1.0 and obs[0] == 1.0
+    env.close()
 
 
 def test_the_grid_has_a_task_axis_and_maze_keeps_its_layout(tmp_path: Path) -> None:
