@@ -125,6 +125,39 @@ ENTRIES = (
         124,
     ),
     Entry(
+        "explore/targets",
+        "explore --families chain frozenlake --sizes 4 30 --seeds 1 2 3 4 5 --agents Farsighter "
+        "'Farsighter (k-step target)' 'Farsighter (mean target)' "
+        "'Farsighter (mean, k-step target)' DDQN",
+        "the next-state value (posterior draw or mean) x k_target (max or k) on the chain of "
+        "length 30 and the slippery 4 x 4 FrozenLake",
+        708,
+    ),
+    Entry(
+        "explore/targets-deepsea",
+        "explore --families deepsea deepsea-stochastic --sizes 10 14 --seeds 1 2 3 4 5 "
+        "--agents Farsighter 'Farsighter (mean target)'",
+        "the posterior-mean target against the default's posterior draw on deep sea and its "
+        "stochastic version, N = 10 and 14",
+        479,
+    ),
+    Entry(
+        "explore/targets-doorkey",
+        "explore --families doorkey --sizes 5 --seeds 1 2 3 --agents Farsighter "
+        "'Farsighter (mean target)'",
+        "the posterior-mean target against the posterior draw on MiniGrid DoorKey-5x5, 3 seeds "
+        "x 100k steps",
+        472,
+    ),
+    Entry(
+        "explore/targets-classic",
+        "explore --families mountaincar acrobot --seeds 1 2 3 --steps 100000 "
+        "--agents Farsighter 'Farsighter (mean target)'",
+        "the posterior-mean target against the posterior draw on MountainCar-v0 and Acrobot-v1, "
+        "3 seeds x 100k steps",
+        555,
+    ),
+    Entry(
         "explore/doorkey",
         "explore --families doorkey --sizes 5 --seeds 1 2 3 --agents DDQN Farsighter "
         "'Farsighter (redraw revisit)'",
