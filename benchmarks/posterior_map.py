@@ -42,6 +42,9 @@ def main() -> None:
     p.add_argument("--episodes", type=int, default=1_000)
     p.add_argument("--seed", type=int, default=1)
     p.add_argument("--name", default="posterior_map")
+    p.add_argument(
+        "--random-features", type=int, default=0, help="blr.random_features of the run (0: none)"
+    )
     args = p.parse_args()
 
     from farsighter import make_config, train
@@ -70,6 +73,7 @@ def main() -> None:
             save_replay=False,
             run_dir=f"{tmp}/run",
             torch_threads=1,
+            **{"blr.random_features": args.random_features},
         )
         train(cfg, [Keep()])
         with (Path(tmp) / "run" / "metrics.csv").open() as fh:
@@ -91,7 +95,8 @@ def main() -> None:
         "visited more than 100 times": visits > 100,
     }
     figures = {
-        "agent": "farsighter (preset auto -> general, no flag)",
+        "agent": "farsighter (preset auto -> general"
+        + (f", blr.random_features {args.random_features})" if args.random_features else ", no flag)"),
         "env": cfg.env,
         "seed": args.seed,
         "steps": cfg.total_steps,

@@ -101,6 +101,34 @@ class MLPTorso(Torso):
         return x
 
 
+class RandomFeatureTorso(Torso):
+    """A flat torso's learned features followed by ``width`` fixed random ReLU features of the
+    observation, psi(s) = relu(W s + b) / sqrt(width) with W and b standard normal, drawn once
+    and never trained (buffers: saved, loaded and copied to the target with the weights).
+
+    A Bayesian linear head over learned features alone is equally certain everywhere: every
+    step adds precision to the few directions the features share (docs/design.md, "Why deep sea
+    N = 20 is not found"). Over these features two observations far apart have directions of
+    their own (on one-hot inputs about 0.4 of each state's squared norm is its own), so the
+    posterior stays wide where the run has not been and narrows where it has: uncertainty about
+    states, as the random prior functions of Osband et al. (2018) give an ensemble."""
+
+    def __init__(self, torso: MLPTorso, obs_dim: int, width: int) -> None:
+        super().__init__()
+        self.torso = torso
+        self.width = width
+        self.register_buffer("rf_weight", torch.randn(width, obs_dim))
+        self.register_buffer("rf_bias", torch.randn(width))
+        self.out_dim = torso.out_dim + width
+
+    def prepare(self, obs_BO: torch.Tensor) -> torch.Tensor:
+        return self.torso.prepare(obs_BO)
+
+    def body(self, x: torch.Tensor) -> torch.Tensor:
+        psi = torch.relu(F.linear(x, self.rf_weight, self.rf_bias)) / math.sqrt(self.width)
+        return torch.cat([self.torso.body(x), psi], dim=1)
+
+
 class NatureCNN(Torso):
     """Mnih et al. (2015) torso of appendix 9.1.1: 32x8s4, 64x4s2, 64x3s1, then 512 units."""
 

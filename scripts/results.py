@@ -158,6 +158,20 @@ ENTRIES = (
         555,
     ),
     Entry(
+        "explore/random-features",
+        "explore --families deepsea --sizes 10 14 20 --seeds 1 2 3 4 5 "
+        "--agents 'Farsighter (random features)'",
+        "the posterior over learned and 512 fixed random features, on deep sea N = 10, 14, 20",
+        0,
+    ),
+    Entry(
+        "explore/random-features-tasks",
+        "explore --families chain frozenlake --sizes 4 30 --seeds 1 2 3 4 5 "
+        "--agents 'Farsighter (random features)'",
+        "the same on the chain of length 30 and the slippery 4 x 4 FrozenLake",
+        0,
+    ),
+    Entry(
         "explore/doorkey",
         "explore --families doorkey --sizes 5 --seeds 1 2 3 --agents DDQN Farsighter "
         "'Farsighter (redraw revisit)'",

@@ -191,6 +191,7 @@ def test_agents_are_one_config_each_on_the_auto_preset(tmp_path: Path) -> None:
         "Farsighter (k-step target)",
         "Farsighter (mean target)",
         "Farsighter (mean, k-step target)",
+        "Farsighter (random features)",
         "OB2I",
         "RND",
     ]
@@ -200,10 +201,11 @@ def test_agents_are_one_config_each_on_the_auto_preset(tmp_path: Path) -> None:
         "Farsighter (redraw k)",
         "Farsighter (mean target)",
         "Farsighter (mean, k-step target)",
+        "Farsighter (random features)",
     }
     assert not named_only & set(StudyConfig().agents)
     assert "Farsighter (redraw step)" in StudyConfig().agents
-    assert len(StudyConfig().agents) == len(AGENTS) - 3
+    assert len(StudyConfig().agents) == len(AGENTS) - 4
     every = [
         run_config(a, QUICK, 3, tmp_path, (chain_id(10), 10_000))
         for a in AGENTS

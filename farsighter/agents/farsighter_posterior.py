@@ -22,7 +22,8 @@ from farsighter.agents.common import (
     build_seeded,
 )
 from farsighter.config import Config
-from farsighter.networks import Torso, make_torso
+from farsighter.errors import ConfigError
+from farsighter.networks import MLPTorso, RandomFeatureTorso, Torso, make_torso
 from farsighter.ops.blr import BLRHead, greedy_predictive_variance
 from farsighter.replay import ReplayBuffer
 
@@ -45,7 +46,16 @@ def seeded_torso(
     linear Q head would (no bias: Q = phi^T w_a)."""
 
     def build() -> tuple[Torso, torch.Tensor]:
-        torso = make_torso(obs_space, cfg.hidden_sizes)
+        torso: Torso = make_torso(obs_space, cfg.hidden_sizes)
+        if cfg.blr.random_features:
+            if not isinstance(torso, MLPTorso):
+                raise ConfigError(
+                    "blr.random_features needs flat observations (an MLP torso); image "
+                    "observations take blr.random_features 0"
+                )
+            torso = RandomFeatureTorso(
+                torso, int(np.prod(obs_space.shape)), cfg.blr.random_features
+            )
         return torso, nn.Linear(torso.out_dim, num_actions, bias=False).weight.detach()
 
     return build_seeded(cfg.seed, build)  # type: ignore[no-any-return]

@@ -50,6 +50,11 @@ class BLRConfig:
     as in randomised value functions (Osband et al. 2019); our extension, not the paper's. With
     gamma = 1 that optimism is not discounted along loops (on the bridge maze, with the general
     posterior, Farsighter failed 2 of 2 seeds that the maze preset solves: docs/results/explore)."""
+    random_features: int = 0
+    """Width of fixed random ReLU features of the observation appended to the learned features
+    the posterior is over (``farsighter.networks.RandomFeatureTorso``; flat observations only):
+    with them the posterior's uncertainty narrows where the run has been and stays wide
+    elsewhere. 0: the learned features alone (the paper). Our extension, not the paper's."""
     posterior_sampling: Literal["recent", "uniform"] = "recent"
     """Batch-mode refresh tuples: the latest D transitions (Table 1's 'most recent'), or D starts
     drawn uniformly from the whole buffer with replacement (the BDQN authors' code)."""
@@ -68,6 +73,10 @@ class BLRConfig:
             (self.posterior_every >= 1, "blr.posterior_every must be >= 1"),
             (self.posterior_samples >= 1, "blr.posterior_samples must be >= 1"),
             (self.redraw_every >= 1, "blr.redraw_every must be >= 1"),
+            (
+                self.random_features >= 0,
+                f"blr.random_features must be >= 0 (0: none; got {self.random_features})",
+            ),
         ]
 
 

@@ -328,6 +328,9 @@ AGENTS: tuple[Agent, ...] = (
     Agent(
         "Farsighter (mean, k-step target)", "farsighter", {"blr.target": "mean", "k_target": "k"}
     ),
+    # the posterior over the learned features and 512 fixed random features of the observation,
+    # so that its uncertainty is about states (farsighter.networks.RandomFeatureTorso)
+    Agent("Farsighter (random features)", "farsighter", {"blr.random_features": 512}),
     Agent("OB2I", "ob2i"),
     Agent("RND", "rnd"),
 )
@@ -336,6 +339,7 @@ _NAMED_ONLY = (
     "Farsighter (redraw k)",
     "Farsighter (mean target)",
     "Farsighter (mean, k-step target)",
+    "Farsighter (random features)",
 )
 DEFAULT_AGENTS = tuple(a.label for a in AGENTS if a.label not in _NAMED_ONLY)
 """The default list: every agent once but those run only when named. "Farsighter (redraw k)"

@@ -1,0 +1,103 @@
+"""blr.random_features: fixed random features of the observation beside the learned ones, so
+that the posterior's uncertainty is about states."""
+
+from __future__ import annotations
+
+import copy
+import math
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+import pytest
+import torch
+
+from farsighter import make_config, train
+from farsighter.cli import main
+from farsighter.config import validate
+from farsighter.errors import ConfigError
+from farsighter.networks import MLPTorso, RandomFeatureTorso
+from farsighter.seeds import batchable
+
+
+def test_the_torso_appends_fixed_random_relu_features() -> None:
+    torch.manual_seed(0)
+    torso = RandomFeatureTorso(MLPTorso(6, (8, 5)), 6, 16)
+    assert torso.out_dim == 5 + 16
+    # the random layer is not trained: buffers, not parameters, and saved with the weights
+    assert list(torso.parameters()) == list(torso.torso.parameters())
+    assert {"rf_weight", "rf_bias"} <= set(torso.state_dict())
+    x = torch.randn(3, 6)
+    out = torso(x)
+    torch.testing.assert_close(out[:, :5], torso.torso(x))
+    psi = torch.relu(x @ torso.rf_weight.T + torso.rf_bias) / math.sqrt(16)
+    torch.testing.assert_close(out[:, 5:], psi)
+    twin = copy.deepcopy(torso)  # the target torso: the same random features
+    torch.testing.assert_close(twin(x), out)
+    # a one-hot observation's features have a squared norm of about 1 (E relu(N(0, 2))^2 = 1)
+    wide = RandomFeatureTorso(MLPTorso(400, (8,)), 400, 4096)
+    norms = wide(torch.eye(400))[:, 8:].square().sum(1)
+    assert norms.mean().item() == pytest.approx(1.0, abs=0.05)
+
+
+def _sd_by_visits(random_features: int, tmp: Path) -> tuple[float, float]:
+    """Farsighter on deep sea N = 6 for 600 episodes (learning from step 1,000): the median
+    predictive sd of the cells the run never can reach (above the diagonal) and of the six cells
+    it visited most."""
+    n, seen = 6, {}
+
+    class Keep:
+        def on_step(self, global_step: int, info: dict[str, Any], agent: Any) -> None:
+            pass
+
+        def on_finish(self, run_dir: Path, agent: Any) -> None:
+            seen["agent"] = agent
+
+    cfg = make_config(
+        "farsighter",
+        f"farsighter/DeepSea{n}-v0",
+        total_steps=n * 600,
+        eval_every=0,
+        eval_episodes=1,
+        progress=False,
+        run_dir=str(tmp / f"rf{random_features}"),
+        torch_threads=1,
+        **{"blr.random_features": random_features},
+    )
+    train(cfg, [Keep()])
+    agent = seen["agent"]
+    rows = int(agent.replay.count[0])
+    frames = agent.replay.frames[0, :rows].reshape(rows, -1)
+    visits = np.bincount(frames[frames.max(1) > 0].argmax(1), minlength=n * n).reshape(n, n)
+    _, var = agent.q_estimate(np.eye(n * n, dtype=np.float32))
+    sd = np.sqrt(var).max(1).reshape(n, n)
+    row, col = np.indices((n, n))
+    often = visits >= np.sort(visits[col <= row])[-6]  # the six most visited cells
+    return float(np.median(sd[col > row])), float(np.median(sd[often]))
+
+
+def test_with_random_features_the_posterior_is_wide_where_the_run_has_not_been(
+    tmp_path: Path,
+) -> None:
+    unreachable, visited = _sd_by_visits(128, tmp_path)
+    with_random = unreachable / visited
+    assert with_random > 2.5  # measured: 3.5 (0.68 against 0.19)
+    # over the learned features alone the sd barely follows the visits (measured: 1.2)
+    unreachable, visited = _sd_by_visits(0, tmp_path)
+    assert with_random > 2 * unreachable / visited
+
+
+def test_random_features_are_checked_and_train_their_seeds_alone(
+    tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    with pytest.raises(ConfigError, match="blr.random_features must be >= 0"):
+        validate(make_config("farsighter", "CartPole-v1", **{"blr.random_features": -1}))
+    cfg = make_config("farsighter", "CartPole-v1", **{"blr.random_features": 32})
+    assert not batchable(cfg) and batchable(make_config("farsighter", "CartPole-v1"))
+    # image observations: one line, and the run directory is not made
+    run = tmp_path / "img"
+    argv = ["train", "--algo", "farsighter", "--env", "MinAtar/Breakout-v1", "--total-steps"]
+    code = main([*argv, "10", "--blr.random-features", "8", "--run-dir", str(run)])
+    err = capsys.readouterr().err.strip()
+    assert code != 0 and len(err.splitlines()) == 1 and "needs flat observations" in err
+    assert not run.exists()
