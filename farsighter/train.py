@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import sys
 from collections.abc import Sequence
 from pathlib import Path
 from typing import Any
@@ -68,10 +69,11 @@ def train(cfg: Config, callbacks: Sequence[Callback] = ()) -> dict[str, Any]:
     )  # a bad id fails before the run dir is touched
     obs_space, act_space = envs.single_observation_space, envs.single_action_space
     check_spaces(cfg.algo, obs_space, act_space)
-    if cfg.blr.random_features and len(obs_space.shape or ()) != 1:  # before the run dir
-        raise ConfigError(
-            f"blr.random_features needs flat observations; {cfg.env} gives images of shape "
-            f"{obs_space.shape} (use blr.random_features 0)"
+    if cfg.blr.random_features and len(obs_space.shape or ()) != 1:
+        print(
+            f"farsighter: blr.random_features applies to flat observations; {cfg.env}'s images "
+            f"{tuple(obs_space.shape or ())} keep the learned features alone",
+            file=sys.stderr,
         )
     overlap = overlap_enabled(cfg.runtime.overlap_env, envs, device)
     path = prepare_run_dir(cfg)

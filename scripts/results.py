@@ -159,9 +159,10 @@ ENTRIES = (
     ),
     Entry(
         "explore/random-features",
-        "explore --families deepsea --sizes 10 14 20 --seeds 1 2 3 4 5 "
+        "explore --families deepsea --sizes 10 14 20 30 --seeds 1 2 3 4 5 "
         "--agents 'Farsighter (random features)'",
-        "the posterior over learned and 512 fixed random features, on deep sea N = 10, 14, 20",
+        "the posterior over learned and 512 fixed random features (the default since), on deep "
+        "sea N = 10, 14, 20 and 30",
         0,
     ),
     Entry(
@@ -169,6 +170,14 @@ ENTRIES = (
         "explore --families chain frozenlake --sizes 4 30 --seeds 1 2 3 4 5 "
         "--agents 'Farsighter (random features)'",
         "the same on the chain of length 30 and the slippery 4 x 4 FrozenLake",
+        0,
+    ),
+    Entry(
+        "explore/random-features-classic",
+        "explore --families mountaincar acrobot --seeds 1 2 3 --steps 100000 "
+        "--agents 'Farsighter (random features)'",
+        "the same on MountainCar-v0 and Acrobot-v1, 3 seeds x 100k steps (over the learned "
+        "features alone: targets-classic)",
         0,
     ),
     Entry(

@@ -192,6 +192,7 @@ def test_agents_are_one_config_each_on_the_auto_preset(tmp_path: Path) -> None:
         "Farsighter (mean target)",
         "Farsighter (mean, k-step target)",
         "Farsighter (random features)",
+        "Farsighter (learned features)",
         "OB2I",
         "RND",
     ]
@@ -202,14 +203,15 @@ def test_agents_are_one_config_each_on_the_auto_preset(tmp_path: Path) -> None:
         "Farsighter (mean target)",
         "Farsighter (mean, k-step target)",
         "Farsighter (random features)",
+        "Farsighter (learned features)",
     }
     assert not named_only & set(StudyConfig().agents)
     assert "Farsighter (redraw step)" in StudyConfig().agents
-    assert len(StudyConfig().agents) == len(AGENTS) - 4
+    assert len(StudyConfig().agents) == len(AGENTS) - 5
     every = [
         run_config(a, QUICK, 3, tmp_path, (chain_id(10), 10_000))
         for a in AGENTS
-        if a.label != "Farsighter (redraw k)"
+        if a.label not in ("Farsighter (redraw k)", "Farsighter (random features)")
     ]
     assert len({repr(dataclasses.replace(c, run_dir="")) for c in every}) == len(every)
     mean_k = run_config(
@@ -217,6 +219,9 @@ def test_agents_are_one_config_each_on_the_auto_preset(tmp_path: Path) -> None:
     )
     assert (mean_k.blr.target, mean_k.k_target) == ("mean", "k")
     assert (every[3].blr.target, every[3].k_target) == ("sample", "max")  # the default's
+    assert (
+        every[3].blr.random_features == 512
+    )  # the default's: the posterior over random features too
     configs = [
         run_config(by[label], QUICK, 3, tmp_path, (chain_id(10), 10_000))
         for label in StudyConfig().agents

@@ -8,6 +8,7 @@ import math
 from pathlib import Path
 from typing import Any
 
+import gymnasium as gym
 import numpy as np
 import pytest
 import torch
@@ -93,11 +94,20 @@ def test_random_features_are_checked_and_train_their_seeds_alone(
     with pytest.raises(ConfigError, match="blr.random_features must be >= 0"):
         validate(make_config("farsighter", "CartPole-v1", **{"blr.random_features": -1}))
     cfg = make_config("farsighter", "CartPole-v1", **{"blr.random_features": 32})
-    assert not batchable(cfg) and batchable(make_config("farsighter", "CartPole-v1"))
-    # image observations: one line, and the run directory is not made
+    learned = make_config("farsighter", "CartPole-v1", **{"blr.random_features": 0})
+    assert not batchable(cfg) and batchable(learned)
+    # image observations keep the learned features, and the run says so in one line
+    from farsighter.agents.farsighter_posterior import seeded_torso
+    from farsighter.networks import MinAtarCNN
+
+    image = gym.spaces.Box(0, 1, (4, 10, 10), np.float32)
+    torso, init_AD = seeded_torso(cfg, image, 3)
+    assert isinstance(torso, MinAtarCNN) and init_AD.shape == (3, torso.out_dim)
+    flat, _ = seeded_torso(cfg, gym.spaces.Box(-1, 1, (4,), np.float32), 2)
+    assert isinstance(flat, RandomFeatureTorso) and flat.out_dim == 128 + 32
     run = tmp_path / "img"
     argv = ["train", "--algo", "farsighter", "--env", "MinAtar/Breakout-v1", "--total-steps"]
-    code = main([*argv, "10", "--blr.random-features", "8", "--run-dir", str(run)])
+    argv += ["20", "--eval-every", "0", "--eval-episodes", "1", "--no-progress"]
+    code = main([*argv, "--blr.random-features", "8", "--run-dir", str(run)])
     err = capsys.readouterr().err.strip()
-    assert code != 0 and len(err.splitlines()) == 1 and "needs flat observations" in err
-    assert not run.exists()
+    assert code == 0 and "keep the learned features alone" in err

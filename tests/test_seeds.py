@@ -52,14 +52,16 @@ def _files(run: Path) -> dict[str, list[str]]:
             {"k": 3, "loss": "mse", "max_grad_norm": 0.5, "optimizer": "rmsprop", "num_envs": 2},
         ),
         ("ddqn", "farsighter/DeepSea6-v0", {"batch_size": 24}),
-        # the defaults: k = 10 with k_target max, the targets' posterior noise, a draw per step
-        ("farsighter", "CartPole-v1", {"preset": "general"}),
+        # the defaults: k = 10 with k_target max, the targets' posterior noise, a draw held for
+        # k (over the learned features: a random-feature torso trains its seeds alone)
+        ("farsighter", "CartPole-v1", {"preset": "general", "blr__random_features": 0}),
         # held draws redrawn on a revisit, two envs a seed, clipping that bites, k = 3
         (
             "farsighter",
             "farsighter/DeepSea6-v0",
             {
                 "preset": "general",
+                "blr__random_features": 0,
                 "k": 3,
                 "num_envs": 2,
                 "max_grad_norm": 0.5,
@@ -139,8 +141,12 @@ def _same_states(alone: Any, batch: Any, where: str = "agent") -> None:
 
 def test_settings_a_batch_cannot_take_train_alone(tmp_path: Path, tiny_config: Any) -> None:
     """Farsighter's batch refuses what it does not batch, and the seeds then train in turn."""
-    base = tiny_config("farsighter", tmp_path, preset="general")
-    for values, says in (({"adaptive_k__enabled": True}, "adaptive k"),):
+    base = tiny_config("farsighter", tmp_path, preset="general", blr__random_features=0)
+    refused = (
+        ({"adaptive_k__enabled": True}, "adaptive k"),
+        ({}, "random_features"),  # the general preset's random-feature torso does not stack
+    )
+    for values, says in refused:
         cfg = tiny_config("farsighter", tmp_path, preset="general", **values)
         assert says in farsighter_seeds.supports(cfg, _box(), torch.device("cpu"))
         assert not batchable(cfg)
@@ -163,7 +169,7 @@ def _agent_state(path: Path) -> dict[str, Any]:
     ("algo", "values"),
     [
         ("ddqn", {"k": 2}),
-        ("farsighter", {"preset": "general", "k": 3}),
+        ("farsighter", {"preset": "general", "k": 3, "blr__random_features": 0}),
         ("rnd", {"preset": "general"}),
     ],
 )

@@ -22,7 +22,6 @@ from farsighter.agents.common import (
     build_seeded,
 )
 from farsighter.config import Config
-from farsighter.errors import ConfigError
 from farsighter.networks import MLPTorso, RandomFeatureTorso, Torso, make_torso
 from farsighter.ops.blr import BLRHead, greedy_predictive_variance
 from farsighter.replay import ReplayBuffer
@@ -47,15 +46,9 @@ def seeded_torso(
 
     def build() -> tuple[Torso, torch.Tensor]:
         torso: Torso = make_torso(obs_space, cfg.hidden_sizes)
-        if cfg.blr.random_features:
-            if not isinstance(torso, MLPTorso):
-                raise ConfigError(
-                    "blr.random_features needs flat observations (an MLP torso); image "
-                    "observations take blr.random_features 0"
-                )
-            torso = RandomFeatureTorso(
-                torso, int(np.prod(obs_space.shape)), cfg.blr.random_features
-            )
+        if cfg.blr.random_features and isinstance(torso, MLPTorso):  # images: learned alone
+            width = cfg.blr.random_features
+            torso = RandomFeatureTorso(torso, int(np.prod(obs_space.shape)), width)
         return torso, nn.Linear(torso.out_dim, num_actions, bias=False).weight.detach()
 
     return build_seeded(cfg.seed, build)  # type: ignore[no-any-return]

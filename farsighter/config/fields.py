@@ -52,9 +52,10 @@ class BLRConfig:
     posterior, Farsighter failed 2 of 2 seeds that the maze preset solves: docs/results/explore)."""
     random_features: int = 0
     """Width of fixed random ReLU features of the observation appended to the learned features
-    the posterior is over (``farsighter.networks.RandomFeatureTorso``; flat observations only):
-    with them the posterior's uncertainty narrows where the run has been and stays wide
-    elsewhere. 0: the learned features alone (the paper). Our extension, not the paper's."""
+    the posterior is over (``farsighter.networks.RandomFeatureTorso``): with them the
+    posterior's uncertainty narrows where the run has been and stays wide elsewhere. Flat
+    observations only: image torsos keep the learned features alone (a run says so on stderr).
+    0: the learned features alone (the paper). Our extension, not the paper's."""
     posterior_sampling: Literal["recent", "uniform"] = "recent"
     """Batch-mode refresh tuples: the latest D transitions (Table 1's 'most recent'), or D starts
     drawn uniformly from the whole buffer with replacement (the BDQN authors' code)."""

@@ -329,8 +329,11 @@ AGENTS: tuple[Agent, ...] = (
         "Farsighter (mean, k-step target)", "farsighter", {"blr.target": "mean", "k_target": "k"}
     ),
     # the posterior over the learned features and 512 fixed random features of the observation,
-    # so that its uncertainty is about states (farsighter.networks.RandomFeatureTorso)
+    # so that its uncertainty is about states (farsighter.networks.RandomFeatureTorso): the
+    # default since docs/results/explore/random-features*; over the learned features alone
+    # before it (every study in docs/results made before those)
     Agent("Farsighter (random features)", "farsighter", {"blr.random_features": 512}),
+    Agent("Farsighter (learned features)", "farsighter", {"blr.random_features": 0}),
     Agent("OB2I", "ob2i"),
     Agent("RND", "rnd"),
 )
@@ -340,12 +343,14 @@ _NAMED_ONLY = (
     "Farsighter (mean target)",
     "Farsighter (mean, k-step target)",
     "Farsighter (random features)",
+    "Farsighter (learned features)",
 )
 DEFAULT_AGENTS = tuple(a.label for a in AGENTS if a.label not in _NAMED_ONLY)
-"""The default list: every agent once but those run only when named. "Farsighter (redraw k)"
-builds the same config as "Farsighter" now that a draw held for k steps is the default (the saved
-studies in docs/results name it); the two mean-target variants belong to the comparison of the
-targets (docs/results/explore/targets)."""
+"""The default list: every agent once but those run only when named. "Farsighter (redraw k)" and
+"Farsighter (random features)" build the same config as "Farsighter" now that a draw held for k
+steps and the random features are the defaults (the saved studies in docs/results name them);
+the two mean-target variants belong to the comparison of the targets
+(docs/results/explore/targets), and "Farsighter (learned features)" to that of the features."""
 
 
 @dataclass(frozen=True)
