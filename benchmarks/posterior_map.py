@@ -96,7 +96,11 @@ def main() -> None:
     }
     figures = {
         "agent": "farsighter (preset auto -> general"
-        + (f", blr.random_features {args.random_features})" if args.random_features else ", no flag)"),
+        + (
+            f", blr.random_features {args.random_features})"
+            if args.random_features
+            else ", no flag)"
+        ),
         "env": cfg.env,
         "seed": args.seed,
         "steps": cfg.total_steps,

@@ -141,8 +141,9 @@ PRESETS: dict[str, Preset] = {
             "What `auto` gives a discrete task that is not Atari: a learner for small tasks "
             "(Adam 1e-3, an update every 4 steps on 64 transitions from the whole replay, a "
             "target copy every 500 steps, 128 x 128) for every agent, with a posterior that "
-            "stays fresh and scaled and whose uncertainty propagates, and (Farsighter) a draw "
-            "held for the k steps of its target, so that Thompson exploration works on tasks "
+            "stays fresh and scaled and whose uncertainty propagates, and (Farsighter) over "
+            "learned and 512 random features of the observation, with a draw held for the k "
+            "steps of its target, so that Thompson exploration works on tasks "
             "nobody tuned it for (docs/results/explore). Reproduce "
             "the paper with --preset control or atari.",
             "Farsighter paper Table 1 (control column) for gamma and the BLR values; the "
