@@ -113,6 +113,9 @@ class RandomFeatureTorso(Torso):
     posterior stays wide where the run has not been and narrows where it has: uncertainty about
     states, as the random prior functions of Osband et al. (2018) give an ensemble."""
 
+    rf_weight: torch.Tensor
+    rf_bias: torch.Tensor
+
     def __init__(self, torso: MLPTorso, obs_dim: int, width: int) -> None:
         super().__init__()
         self.torso = torso
