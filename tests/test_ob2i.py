@@ -172,6 +172,7 @@ def test_separate_heads_each_own_a_hidden_layer(
     assert net.torso.out_dim == trunk_dim
     assert net.heads.hidden_weight.shape == (5, width, trunk_dim)
     assert net.heads.out_weight.shape == (5, 3, width)
+    space.seed(0)  # the space's own generator: unseeded, a draw could leave a unit dead
     obs = torch.as_tensor(np.stack([space.sample() for _ in range(2)]))
     with torch.no_grad():
         q = net(obs)
