@@ -57,6 +57,7 @@ MAZE = {  # the maze study's shared settings, written out so this check does not
     "blr.prior_std": 10.0,
     "blr.noise_std": 10.0,
 }
+GENERAL = {"preset": "auto", "learning_starts": 500}
 ADAPTIVE = {"adaptive_k.enabled": True, "adaptive_k.k_min": 2, "adaptive_k.k_max": 12}
 
 # name: (algo, env, steps, overrides)
@@ -102,6 +103,11 @@ RUNS: dict[str, tuple[str, str, int, dict[str, Any]]] = {
     "bdqn-maze": ("bdqn", "farsighter/BridgeMaze-v0", 4_000, {**MAZE, "blr.redraw": "episode"}),
     "farsighter-maze": ("farsighter", "farsighter/BridgeMaze-v0", 4_000, {**MAZE, "k": 10}),
     "ob2i-maze": ("ob2i", "farsighter/BridgeMaze-v0", 4_000, MAZE),
+    # the library's defaults (auto: the general preset; Farsighter over learned and random
+    # features, incremental posterior refreshed every 100 steps, draws held for k)
+    "ddqn-general-deepsea": ("ddqn", "farsighter/DeepSea10-v0", 3_000, GENERAL),
+    "farsighter-general-deepsea": ("farsighter", "farsighter/DeepSea10-v0", 3_000, GENERAL),
+    "bdqn-general-deepsea": ("bdqn", "farsighter/DeepSea10-v0", 3_000, GENERAL),
 }
 
 

@@ -336,6 +336,11 @@ def test_cholesky_jitter_repairs_non_pd() -> None:
     torch.testing.assert_close(l_2DD[1], torch.eye(6, dtype=torch.float64))
     with pytest.raises(ValueError, match="NaN"):
         cholesky_jitter(torch.full((3, 3), float("nan")))
+    for bad in (float("inf"), -float("inf"), float("nan")):  # one bad entry in a batch
+        m_2DD = torch.eye(4, dtype=torch.float64).repeat(2, 1, 1)
+        m_2DD[1, 2, 3] = bad
+        with pytest.raises(ValueError, match="NaN or inf"):
+            cholesky_jitter(m_2DD)
 
 
 def test_head_refresh_counts_jitter_events() -> None:

@@ -139,6 +139,38 @@ def test_incremental_mode_accumulates_update_minibatches(tmp_path: Path) -> None
     assert torch.equal(agent.head.phiy_AD, y_stats)  # a refresh alone adds nothing
 
 
+def test_q_variance_without_adaptive_k_is_the_refreshs_own_when_read(tmp_path: Path) -> None:
+    """With adaptive k off the Q-variance is computed when read (diagnostics, checkpoints):
+    it is the value at the refresh, from the rows the refresh held, however many minibatches
+    were added after it; a loaded checkpoint keeps its saved value."""
+    from farsighter.ops.blr import greedy_predictive_variance
+
+    agent = make_agent(
+        tmp_path, blr__mode="incremental", blr__random_features=16, k=3, batch_size=128
+    )
+    feed(agent, 300)
+    for refresh in range(3):
+        for _ in range(16 if refresh == 0 else 5):  # 16 x 128 rows: the window is full, in place
+            agent.update()
+        agent.refresh_posterior()
+        at_refresh = greedy_predictive_variance(agent.head, agent.recent_phi.rows())
+        for _ in range(7):  # more rows in the recent window, the posterior unchanged
+            agent.update()
+        if refresh == 1:  # read through a checkpoint first
+            assert agent.state_dict(include_replay=False)["counters"]["q_variance"] == at_refresh
+        assert agent.diagnostics()["q_variance"] == at_refresh
+    saved = agent.state_dict(include_replay=False)
+    other = make_agent(
+        tmp_path, blr__mode="incremental", blr__random_features=16, k=3, batch_size=128
+    )
+    feed(other, 300)
+    for _ in range(5):
+        other.update()
+    other.refresh_posterior()  # its own deferred value, replaced by the load
+    other.load_state_dict(saved)
+    assert other.diagnostics()["q_variance"] == at_refresh
+
+
 def test_recent_rows_keep_the_latest_rows_in_order() -> None:
     """The ring buffer of incremental mode's recent features holds what concatenating and
     keeping the last rows held, after adds of every size (larger than it too), and round-trips

@@ -220,3 +220,27 @@ def test_row_draws_are_generator_choice_without_its_checks(span: list[int]) -> N
     np.testing.assert_array_equal(l_N, l_ref)
     assert e_N.dtype == np.int64 and ours.random() == ref.random()
     assert set(e_N.tolist()) == {i for i, s in enumerate(span) if s > 0}  # empty streams never
+
+
+@pytest.mark.parametrize("stack", [1, 3])
+def test_one_stream_fast_add_writes_the_rows_of_the_array_path(stack: int) -> None:
+    """``add`` with one stream takes scalar indices (``_add_one``); every array it keeps, and
+    every minibatch after, equals what the array path for any number of streams
+    (``_add_streams``) writes, over terminations, truncations and a wraparound."""
+    shape = (stack, 2) if stack > 1 else (2,)
+    fast = ReplayBuffer(23, shape, np.float32, frame_stack=stack, seed=3)
+    ref = ReplayBuffer(23, shape, np.float32, frame_stack=stack, seed=3)
+    rng = np.random.default_rng(0)
+    for t in range(60):
+        obs = rng.normal(size=(1, *shape)).astype(np.float32)
+        ends = rng.random(2) < 0.1
+        final = [rng.normal(size=shape).astype(np.float32)] if ends.any() else None
+        args = (obs, np.array([t % 3]), np.array([rng.normal()]), ends[:1], ends[1:], final)
+        fast.add(*args)
+        ref._add_streams(*args)
+    for name in ("frames", "actions", "rewards", "flags", "t_ep", "count", "episode_t"):
+        assert np.array_equal(getattr(fast, name), getattr(ref, name)), name
+        assert getattr(fast, name).dtype == getattr(ref, name).dtype, name
+    a, b = fast.sample(32, k=3, gamma=G), ref.sample(32, k=3, gamma=G)
+    assert np.array_equal(a.obs, b.obs) and np.array_equal(a.returns, b.returns)
+    assert np.array_equal(a.next_obs, b.next_obs) and np.array_equal(a.bootstrap, b.bootstrap)

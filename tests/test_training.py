@@ -248,3 +248,28 @@ def test_epsilon_draws_for_one_environment_are_numpys_array_draws(num_actions: i
         assert actions.tolist() == numpys.integers(0, num_actions, size=1).tolist()
         assert actions.dtype == np.int64
     assert mine.bit_generator.state == numpys.bit_generator.state
+
+
+@pytest.mark.parametrize("epsilon", [0.0, 0.3, 1.0])
+def test_epsilon_greedy_for_one_environment_acts_as_the_array_path(epsilon: float) -> None:
+    """One environment's scalar path of epsilon_greedy gives the actions of the array path
+    (coins, random actions, np.where over the greedy ones), calls greedy() only when it acts
+    greedily, and leaves the generator where the array path leaves it."""
+    from farsighter.exploration.epsilon import epsilon_draws, epsilon_greedy
+
+    mine, ref = np.random.default_rng(5), np.random.default_rng(5)
+    calls = []
+
+    def greedy() -> np.ndarray:
+        calls.append(1)
+        return np.array([len(calls) % 2], dtype=np.int64)
+
+    for _ in range(300):
+        before = len(calls)
+        got = epsilon_greedy(mine, epsilon, 3, greedy, 1)
+        coins, random_actions = epsilon_draws(ref, 3, 1)
+        greedy_call = len(calls) > before
+        assert greedy_call == (not bool(coins[0] < epsilon))
+        want = random_actions if coins[0] < epsilon else np.array([len(calls) % 2])
+        assert got.tolist() == want.tolist() and got.dtype == np.int64
+    assert mine.bit_generator.state == ref.bit_generator.state

@@ -197,7 +197,7 @@ class FarsighterAgent:
     def diagnostics(self) -> dict[str, float]:
         return {
             "k": float(self.counters.k),
-            "q_variance": self.counters.q_variance,
+            "q_variance": self.counters.settle().q_variance,
             "posterior_refreshes": float(self.head.num_refreshes),
             "jitter_events": float(self.head.jitter_events),
             "noise_std": self.head.noise_std,
@@ -212,6 +212,7 @@ class FarsighterAgent:
     }
 
     def state_dict(self, include_replay: bool = True) -> dict[str, Any]:
+        self.counters.settle()
         state = save_state(self, self.SAVED, include_replay)
         state["exploration"] = self.exploration.state_dict()
         state["recent_phi"] = self.recent_phi.state_dict()

@@ -157,7 +157,7 @@ class FarsighterSeedMember(Member):
         head, c = self.parts.head, self.parts.counters
         return {
             "k": float(c.k),
-            "q_variance": c.q_variance,
+            "q_variance": c.settle().q_variance,
             "posterior_refreshes": float(head.num_refreshes),
             "jitter_events": float(head.jitter_events),
             "noise_std": head.noise_std,
@@ -174,7 +174,7 @@ class FarsighterSeedMember(Member):
             "opt": member_optimizer_state(b.opt, s),
             "rng": p.rng.bit_generator.state,
             "gen": p.gen.get_state(),
-            "counters": dataclasses.asdict(p.counters),
+            "counters": dataclasses.asdict(p.counters.settle()),
             "replay": b.replay.member_state(s) if include_replay else None,
             "exploration": p.exploration.state_dict(),
             "recent_phi": p.recent_phi.state_dict(),

