@@ -256,6 +256,14 @@ def final_observations(info: dict[str, Any], num_envs: int) -> list[Any] | None:
     return [info["final_obs"][i] if mask[i] else None for i in range(num_envs)]
 
 
+def episode_diagnostics(agent: Agent) -> dict[str, float]:
+    """What an episode's metrics row reads of the agent (epsilon, k): its
+    ``episode_diagnostics()`` where it has one (what it can say without costly work: Farsighter's
+    Q-variance waits for the log interval), else its ``diagnostics()``."""
+    cheap = getattr(agent, "episode_diagnostics", None)
+    return cheap() if callable(cheap) else agent.diagnostics()
+
+
 def finished_episodes(info: dict[str, Any]) -> list[tuple[float, int, float | None]]:
     """(return, length, ``info["is_success"]`` or None) of the episodes that ended this step."""
     final = info.get("final_info")
@@ -326,7 +334,7 @@ class RunLog:
             log.success({"global_step": step, "episode": state.episodes, "success": success})
             log.scalar("charts/success_rate", float(np.mean(state.recent_successes)), step)
         state.recent_returns.append(ep_return)
-        diag = agent.diagnostics()
+        diag = episode_diagnostics(agent)
         log.metrics.write(
             {
                 "global_step": step,

@@ -156,6 +156,8 @@ def test_q_variance_without_adaptive_k_is_the_refreshs_own_when_read(tmp_path: P
         at_refresh = greedy_predictive_variance(agent.head, agent.recent_phi.rows())
         for _ in range(7):  # more rows in the recent window, the posterior unchanged
             agent.update()
+        assert agent.episode_diagnostics() == {"k": 3.0}  # an episode's row: nothing computed
+        assert agent.counters._pending is not None
         if refresh == 1:  # read through a checkpoint first
             assert agent.state_dict(include_replay=False)["counters"]["q_variance"] == at_refresh
         assert agent.diagnostics()["q_variance"] == at_refresh

@@ -194,6 +194,10 @@ class FarsighterAgent:
             ),
         )
 
+    def episode_diagnostics(self) -> dict[str, float]:
+        """What an episode's metrics row reads (k), without the deferred Q-variance."""
+        return {"k": float(self.counters.k)}
+
     def diagnostics(self) -> dict[str, float]:
         return {
             "k": float(self.counters.k),

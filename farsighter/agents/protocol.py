@@ -35,7 +35,9 @@ class Agent(Protocol):
         ...
 
     def diagnostics(self) -> dict[str, float]:
-        """Scalars worth logging (epsilon, k, posterior variance, ...)."""
+        """Scalars worth logging (epsilon, k, posterior variance, ...). An agent may also have
+        ``episode_diagnostics()``, the part of them an episode's metrics row reads (epsilon,
+        k) when the rest costs work (:func:`farsighter.session.episode_diagnostics`)."""
         ...
 
     def q_estimate(self, obs_B: np.ndarray) -> tuple[np.ndarray, np.ndarray | None]:

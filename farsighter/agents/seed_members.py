@@ -153,6 +153,10 @@ class FarsighterSeedMember(Member):
         b = self.batch
         return b.torso.member_forward(obs_tensor(np.asarray(obs_B), b.device), self.s)
 
+    def episode_diagnostics(self) -> dict[str, float]:
+        """What an episode's metrics row reads (k), without the deferred Q-variance."""
+        return {"k": float(self.parts.counters.k)}
+
     def diagnostics(self) -> dict[str, float]:
         head, c = self.parts.head, self.parts.counters
         return {
