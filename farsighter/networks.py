@@ -127,8 +127,14 @@ class RandomFeatureTorso(Torso):
     def prepare(self, obs_BO: torch.Tensor) -> torch.Tensor:
         return self.torso.prepare(obs_BO)
 
-    def body(self, x: torch.Tensor) -> torch.Tensor:
-        psi = torch.relu(F.linear(x, self.rf_weight, self.rf_bias)) / math.sqrt(self.width)
+    def random_features(self, x: torch.Tensor) -> torch.Tensor:
+        """psi(s) of prepared observations, (B, width). In place: nothing in it is trained."""
+        return F.linear(x, self.rf_weight, self.rf_bias).relu_().div_(math.sqrt(self.width))
+
+    def body(self, x: torch.Tensor, psi: torch.Tensor | None = None) -> torch.Tensor:
+        """[learned features, psi(s)]; ``psi`` when already computed (by a torso of the same
+        random layer: an online torso and its target share it)."""
+        psi = self.random_features(x) if psi is None else psi
         return torch.cat([self.torso.body(x), psi], dim=1)
 
 
@@ -227,6 +233,15 @@ def online_and_target(
     """``online(obs), target(obs)`` of two networks of one architecture, with the observations
     scaled and laid out once (the double-Q target's two forwards over s')."""
     x = online.prepare(obs)
+    if (
+        isinstance(online, RandomFeatureTorso)
+        and isinstance(target, RandomFeatureTorso)
+        and online.precision == target.precision == "fp32"
+    ):
+        # The random layer is the same in both (buffers never trained, copied with the target):
+        # psi(s') once, the same numbers as two forwards (tests/test_random_features.py).
+        psi = online.random_features(x)
+        return online.body(x, psi), target.body(x, psi)
     return online(x, prepared=True), target(x, prepared=True)
 
 

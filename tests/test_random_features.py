@@ -41,6 +41,46 @@ def test_the_torso_appends_fixed_random_relu_features() -> None:
     assert norms.mean().item() == pytest.approx(1.0, abs=0.05)
 
 
+def test_an_online_torso_and_its_target_share_their_random_features(tmp_path: Path) -> None:
+    """online_and_target computes psi(s') once for both torsos: the same numbers as two
+    forwards, after training moved the online torso away from its target, and the random
+    layers equal in both after the target copy and a checkpoint load (what the sharing needs)."""
+    from farsighter.agents.farsighter import FarsighterAgent
+    from farsighter.networks import online_and_target
+
+    cfg = make_config(
+        "farsighter",
+        "farsighter/DeepSea6-v0",
+        total_steps=1_200,
+        learning_starts=200,
+        target_update_every=700,
+        eval_every=0,
+        eval_episodes=1,
+        progress=False,
+        run_dir=str(tmp_path / "run"),
+        torch_threads=1,
+        **{"blr.random_features": 32},
+    )
+    train(cfg)
+    env = gym.make("farsighter/DeepSea6-v0")
+    agent = FarsighterAgent(
+        cfg, env.observation_space, env.action_space, frame_stack=1, device=torch.device("cpu")
+    )
+    agent.load_state_dict(
+        torch.load(tmp_path / "run" / "checkpoint.pt", weights_only=False)["agent"]
+    )
+    online, target = agent.torso, agent.loss.torso_target
+    assert isinstance(online, RandomFeatureTorso) and isinstance(target, RandomFeatureTorso)
+    assert torch.equal(online.rf_weight, target.rf_weight)
+    assert torch.equal(online.rf_bias, target.rf_bias)
+    obs = torch.from_numpy(np.eye(36, dtype=np.float32))
+    with torch.no_grad():
+        shared_online, shared_target = online_and_target(online, target, obs)
+        assert not torch.equal(online(obs), target(obs))  # the online torso has moved
+        assert torch.equal(shared_online, online(obs))
+        assert torch.equal(shared_target, target(obs))
+
+
 def _sd_by_visits(random_features: int, tmp: Path) -> tuple[float, float]:
     """Farsighter on deep sea N = 6 for 600 episodes (learning from step 1,000): the median
     predictive sd of the cells the run never can reach (above the diagonal) and of the six cells
