@@ -225,11 +225,13 @@ def test_row_draws_are_generator_choice_without_its_checks(span: list[int]) -> N
 @pytest.mark.parametrize("stack", [1, 3])
 def test_one_stream_fast_add_writes_the_rows_of_the_array_path(stack: int) -> None:
     """``add`` with one stream takes scalar indices (``_add_one``); every array it keeps, and
-    every minibatch after, equals what the array path for any number of streams
-    (``_add_streams``) writes, over terminations, truncations and a wraparound."""
+    every minibatch after, equals what the array path for any number of streams writes, over
+    terminations, truncations and a wraparound."""
     shape = (stack, 2) if stack > 1 else (2,)
     fast = ReplayBuffer(23, shape, np.float32, frame_stack=stack, seed=3)
     ref = ReplayBuffer(23, shape, np.float32, frame_stack=stack, seed=3)
+    assert fast.scalar_add
+    ref.scalar_add = False  # the array path
     rng = np.random.default_rng(0)
     for t in range(60):
         obs = rng.normal(size=(1, *shape)).astype(np.float32)
@@ -237,7 +239,7 @@ def test_one_stream_fast_add_writes_the_rows_of_the_array_path(stack: int) -> No
         final = [rng.normal(size=shape).astype(np.float32)] if ends.any() else None
         args = (obs, np.array([t % 3]), np.array([rng.normal()]), ends[:1], ends[1:], final)
         fast.add(*args)
-        ref._add_streams(*args)
+        ref.add(*args)
     for name in ("frames", "actions", "rewards", "flags", "t_ep", "count", "episode_t"):
         assert np.array_equal(getattr(fast, name), getattr(ref, name)), name
         assert getattr(fast, name).dtype == getattr(ref, name).dtype, name

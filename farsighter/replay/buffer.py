@@ -155,6 +155,8 @@ class ReplayBuffer:
             dtype = torch.from_numpy(np.zeros(0, dtype=obs_dtype)).dtype
             self.mirror = torch.zeros((e * c + 1, *self.frame_shape), dtype=dtype, device=device)
         self._written: list[int] = []  # flat rows written by the current add (for the mirror)
+        # one stream and no mirror: add() writes with scalar indices (_add_one)
+        self.scalar_add = num_envs == 1 and self.mirror is None
 
     # ------------------------------------------------------------------ writing
     @property
@@ -208,19 +210,9 @@ class ReplayBuffer:
         Every stream's row is written in one array operation, then the final rows of the streams
         whose episode ended (the streams' rows are disjoint, so this order stores what writing
         stream after stream stores)."""
-        add = self._add_one if self.num_envs == 1 and self.mirror is None else self._add_streams
-        add(obs_E, action_E, reward_E, terminated_E, truncated_E, final_obs_E)
-
-    def _add_streams(
-        self,
-        obs_E: Any,
-        action_E: Any,
-        reward_E: Any,
-        terminated_E: Any,
-        truncated_E: Any,
-        final_obs_E: Any,
-    ) -> None:
-        """:meth:`add` for any number of streams, in array operations."""
+        if self.scalar_add:
+            self._add_one(obs_E, action_E, reward_E, terminated_E, truncated_E, final_obs_E)
+            return
         term_E = np.asarray(terminated_E, dtype=bool).reshape(self.num_envs)
         trunc_E = np.asarray(truncated_E, dtype=bool).reshape(self.num_envs)
         e_E = np.arange(self.num_envs)
@@ -253,9 +245,10 @@ class ReplayBuffer:
         truncated_E: Any,
         final_obs_E: Any,
     ) -> None:
-        """:meth:`add` for one stream and no device mirror: the same rows written with scalar
-        indices (the array operations cost about 60 microseconds a step on a small task, more
-        than its environment step; tests/test_replay.py compares the two row for row)."""
+        """:meth:`add` for one stream and no device mirror (``scalar_add``): the rows of the
+        array path written with scalar indices (its array operations cost about 60
+        microseconds a step on a small task, more than its environment step;
+        tests/test_replay.py compares the two row for row)."""
         term = bool(np.asarray(terminated_E).reshape(-1)[0])
         trunc = bool(np.asarray(truncated_E).reshape(-1)[0])
         slot = int(self.count[0]) % self.capacity
