@@ -22,6 +22,11 @@ def linear_schedule(start: float, end: float, duration: int, step: int) -> float
     return start + frac * (end - start)
 
 
+def epsilon_draw(rng: np.random.Generator, num_actions: int) -> tuple[float, int]:
+    """One environment's coin and random action, as scalars (:func:`epsilon_draws` for n = 1)."""
+    return rng.random(), int(rng.integers(0, num_actions))
+
+
 def epsilon_draws(
     rng: np.random.Generator, num_actions: int, n: int
 ) -> tuple[np.ndarray, np.ndarray]:
@@ -30,7 +35,7 @@ def epsilon_draws(
     and the same generator state after (``tests/test_training.py``) at a fifth of the cost
     (numpy's array path costs about 15 microseconds a call)."""
     if n == 1:
-        coin, action = rng.random(), rng.integers(0, num_actions)
+        coin, action = epsilon_draw(rng, num_actions)
         return np.array([coin]), np.array([action], dtype=np.int64)
     return rng.random(n), np.asarray(rng.integers(0, num_actions, size=n))
 
@@ -46,7 +51,7 @@ def epsilon_greedy(
     called when some environment acts greedily. One environment takes scalars (the same draws,
     the same actions, a fifth of the array path's cost)."""
     if n == 1:
-        coin, action = rng.random(), rng.integers(0, num_actions)
+        coin, action = epsilon_draw(rng, num_actions)
         if coin < epsilon:
             return np.array([action], dtype=np.int64)
         return np.array(greedy(), dtype=np.int64)

@@ -251,15 +251,13 @@ class ReplayBuffer:
         tests/test_replay.py compares the two row for row)."""
         term = bool(np.asarray(terminated_E).reshape(-1)[0])
         trunc = bool(np.asarray(truncated_E).reshape(-1)[0])
-        slot = int(self.count[0]) % self.capacity
-        obs = np.asarray(obs_E)
-        self.frames[0, slot] = obs[0, -1] if self.frame_stack > 1 else obs[0]
-        self.actions[0, slot] = np.asarray(action_E)[0]
-        self.rewards[0, slot] = float(np.asarray(reward_E, dtype=np.float64).reshape(-1)[0])
-        self.flags[0, slot] = (TERMINATED if term else 0) | (TRUNCATED if trunc else 0)
-        self.t_ep[0, slot] = self.episode_t[0]
-        self.count[0] += 1
-        self.episode_t[0] += 1
+        self._write(
+            0,
+            self._frame(np.asarray(obs_E)[0]),
+            np.asarray(action_E)[0],
+            float(np.asarray(reward_E, dtype=np.float64).reshape(-1)[0]),
+            int(TERMINATED if term else 0) | int(TRUNCATED if trunc else 0),
+        )
         if term or trunc:
             if final_obs_E is None or final_obs_E[0] is None:
                 raise ValueError("final_obs_E is required for streams whose episode ended")
