@@ -17,6 +17,7 @@ would write.
 
 from __future__ import annotations
 
+import math
 from collections.abc import Sequence
 from typing import Any
 
@@ -24,7 +25,7 @@ import torch
 import torch.nn.functional as F
 from torch import nn
 
-from farsighter.networks import MLPTorso, QNetwork
+from farsighter.networks import MLPTorso, QNetwork, RandomFeatureTorso
 
 ALIGN = 16
 """Floats (64 bytes) that every seed's slice starts at a multiple of. A tensor alone starts at an
@@ -137,8 +138,14 @@ def _product(a_SMK: torch.Tensor, b_SKN: torch.Tensor) -> torch.Tensor:
 
 def stackable(net: nn.Module) -> bool:
     """Whether :class:`StackedQNetwork` can stack this network: a QNetwork with an MLP torso in
-    fp32, or such a torso alone (the image torsos and bf16 autocast keep their own path)."""
+    fp32, or such a torso alone, bare or with fixed random features beside it
+    (:class:`~farsighter.networks.RandomFeatureTorso`; the image torsos and bf16 autocast keep
+    their own path)."""
     torso = net.torso if isinstance(net, QNetwork) else net
+    if isinstance(torso, RandomFeatureTorso):  # a torso of the posterior's, never under a head
+        if isinstance(net, QNetwork) or torso.precision != "fp32":
+            return False
+        torso = torso.torso
     return isinstance(torso, MLPTorso) and torso.precision == "fp32"
 
 
@@ -147,15 +154,27 @@ class StackedQNetwork(nn.Module):
     seed axis.
 
     ``forward(obs_SB...)`` gives Q (S, B, A), or the features phi (S, B, D) of stacked torsos
-    (a ReLU after every layer, the last included). Parameters are listed in the networks'
+    (a ReLU after every layer, the last included; random-feature torsos add each seed's own
+    fixed psi(s) after them, stacked as buffers). Parameters are listed in the networks'
     ``parameters()`` order (each layer's weight, then its bias; the head last), so an optimizer
     over them holds, at each index, the state of the same parameter of every seed."""
+
+    rf_weight: torch.Tensor
+    rf_bias: torch.Tensor
 
     def __init__(self, nets: Sequence[nn.Module]) -> None:
         super().__init__()
         if not nets or not all(stackable(net) for net in nets):
             raise ValueError("StackedQNetwork stacks QNetworks with fp32 MLP torsos, or the torsos")
-        self.relu_last = isinstance(nets[0], MLPTorso)  # a torso: features, no linear head
+        first = nets[0]
+        # a torso: features, no linear head
+        self.relu_last = isinstance(first, MLPTorso | RandomFeatureTorso)
+        self.rf_width = first.width if isinstance(first, RandomFeatureTorso) else 0
+        self.buffer_names: list[str] = []
+        if self.rf_width:  # each seed's random layer, drawn under its own seed (never trained)
+            for name in ("rf_weight", "rf_bias"):
+                self.register_buffer(name, _stacked([getattr(net, name) for net in nets]))
+                self.buffer_names.append(name)
         self.names = [name for name, _ in nets[0].named_parameters()]
         self.weights = nn.ParameterList(
             nn.Parameter(_stacked([dict(net.named_parameters())[name].detach() for net in nets]))
@@ -171,16 +190,26 @@ class StackedQNetwork(nn.Module):
     def forward(self, obs_SB: torch.Tensor) -> torch.Tensor:
         """Q (S, B, A) (features (S, B, D) of torsos) of each seed on its own rows (one seed's
         network alone: :meth:`member_forward`)."""
-        x = obs_SB.float().flatten(2)
+        x = inputs = obs_SB.float().flatten(2)
         layers = list(zip(self._params[0::2], self._params[1::2], strict=True))
         relu = torch.relu if torch.is_grad_enabled() else torch.relu_  # in place: stays aligned
         for weight, bias in layers[:-1]:  # the torso: ReLU after each layer
             x = relu(stacked_linear(x, weight, bias))
         weight, bias = layers[-1]  # the linear head, or the torso's last layer
         x = stacked_linear(x, weight, bias)
+        if self.rf_width:  # RandomFeatureTorso.body: [learned features, psi(s)]
+            psi = self.random_features(inputs)
+            return aligned(torch.cat([relu(x), psi], dim=2))
         # features: each seed's slice aligned as a tensor alone (the seeds' own products with
         # them round as the agent alone's do)
         return aligned(relu(x)) if self.relu_last else x
+
+    def random_features(self, x_SBO: torch.Tensor) -> torch.Tensor:
+        """Each seed's psi(s) = relu(W s + b) / sqrt(width) on its own rows, (S, B, width)
+        (:meth:`RandomFeatureTorso.random_features`, in place: nothing in it is trained)."""
+        with torch.no_grad():
+            psi = stacked_linear(x_SBO, self.rf_weight, self.rf_bias)
+        return psi.relu_().div_(math.sqrt(self.rf_width))
 
     def member_forward(self, obs_B: torch.Tensor, s: int) -> torch.Tensor:
         """Seed ``s``'s network alone on ``obs_B`` (B rows): the operations of its QNetwork or
@@ -188,26 +217,33 @@ class StackedQNetwork(nn.Module):
         x = obs_B.float().flatten(1)
         params = [p[s] for p in self._params]
         last = len(params) // 2 - 1
+        inputs = x
         for i in range(0, len(params), 2):
             x = F.linear(x, params[i], params[i + 1])
             if i // 2 < last or self.relu_last:
                 x = torch.relu(x)
+        if self.rf_width:
+            psi = F.linear(inputs, self.rf_weight[s], self.rf_bias[s]).relu_()
+            return torch.cat([x, psi.div_(math.sqrt(self.rf_width))], dim=1)
         return x
 
     def member_state(self, s: int) -> dict[str, torch.Tensor]:
-        """Seed ``s``'s weights as its QNetwork's ``state_dict`` (copies)."""
-        return {
-            name: p[s].detach().clone() for name, p in zip(self.names, self.weights, strict=True)
-        }
+        """Seed ``s``'s weights as its QNetwork's (or torso's) ``state_dict`` (copies)."""
+        state = {name: getattr(self, name)[s].clone() for name in self.buffer_names}
+        for name, p in zip(self.names, self.weights, strict=True):
+            state[name] = p[s].detach().clone()
+        return state
 
     def load_member(self, s: int, state: dict[str, torch.Tensor]) -> None:
-        """Write a QNetwork ``state_dict`` into seed ``s``'s slices."""
-        missing = set(self.names) ^ set(state)
+        """Write a QNetwork (or torso) ``state_dict`` into seed ``s``'s slices."""
+        missing = set(self.names + self.buffer_names) ^ set(state)
         if missing:
             raise KeyError(f"a QNetwork state of another shape: keys {sorted(missing)} differ")
         with torch.no_grad():
             for name, p in zip(self.names, self.weights, strict=True):
                 p[s].copy_(state[name])
+            for name in self.buffer_names:
+                getattr(self, name)[s].copy_(state[name])
 
 
 def _stacked(tensors: Sequence[torch.Tensor]) -> torch.Tensor:

@@ -53,9 +53,10 @@ def _files(run: Path) -> dict[str, list[str]]:
         ),
         ("ddqn", "farsighter/DeepSea6-v0", {"batch_size": 24}),
         # the defaults: k = 10 with k_target max, the targets' posterior noise, a draw held for
-        # k (over the learned features: a random-feature torso trains its seeds alone)
-        ("farsighter", "CartPole-v1", {"preset": "general", "blr__random_features": 0}),
-        # held draws redrawn on a revisit, two envs a seed, clipping that bites, k = 3
+        # k, each seed's own fixed random features beside its learned ones
+        ("farsighter", "CartPole-v1", {"preset": "general"}),
+        # held draws redrawn on a revisit, two envs a seed, clipping that bites, k = 3, over the
+        # learned features alone
         (
             "farsighter",
             "farsighter/DeepSea6-v0",
@@ -113,10 +114,10 @@ def test_a_seed_in_a_batch_trains_as_it_does_alone(
     # the seeds are different runs
     first = _agent_state(tmp_path / "batch" / f"s{SEEDS[0]}" / "policy.pt")
     second = _agent_state(tmp_path / "batch" / f"s{SEEDS[1]}" / "policy.pt")
-    net, name = (
-        ("torso", "net.0.weight") if "bdqn" in algo or "far" in algo else ("q", "head.weight")
-    )
-    assert not torch.equal(first[net][name], second[net][name])
+    net = "torso" if "bdqn" in algo or "far" in algo else "q"
+    for name in first[net]:  # the first layer (of the learned torso) and the random layer
+        if name.endswith(("net.0.weight", "head.weight", "rf_weight")):
+            assert not torch.equal(first[net][name], second[net][name]), name
 
 
 def _same_states(alone: Any, batch: Any, where: str = "agent") -> None:
@@ -142,15 +143,12 @@ def _same_states(alone: Any, batch: Any, where: str = "agent") -> None:
 def test_settings_a_batch_cannot_take_train_alone(tmp_path: Path, tiny_config: Any) -> None:
     """Farsighter's batch refuses what it does not batch, and the seeds then train in turn."""
     base = tiny_config("farsighter", tmp_path, preset="general", blr__random_features=0)
-    refused = (
-        ({"adaptive_k__enabled": True}, "adaptive k"),
-        ({}, "random_features"),  # the general preset's random-feature torso does not stack
-    )
-    for values, says in refused:
-        cfg = tiny_config("farsighter", tmp_path, preset="general", **values)
-        assert says in farsighter_seeds.supports(cfg, _box(), torch.device("cpu"))
-        assert not batchable(cfg)
+    cfg = tiny_config("farsighter", tmp_path, preset="general", adaptive_k__enabled=True)
+    assert "adaptive k" in farsighter_seeds.supports(cfg, _box(), torch.device("cpu"))
+    assert not batchable(cfg)
     assert farsighter_seeds.supports(base, _box(), torch.device("cpu")) == ""
+    defaults = tiny_config("farsighter", tmp_path, preset="general")  # random features stack
+    assert defaults.blr.random_features and batchable(defaults)
     image = gym.spaces.Box(0, 255, (4, 84, 84), np.uint8)
     assert "image" in farsighter_seeds.supports(base, image, torch.device("cpu"))
     assert "ob2i" not in BATCHED and not batchable(tiny_config("ob2i", tmp_path))
@@ -169,7 +167,7 @@ def _agent_state(path: Path) -> dict[str, Any]:
     ("algo", "values"),
     [
         ("ddqn", {"k": 2}),
-        ("farsighter", {"preset": "general", "k": 3, "blr__random_features": 0}),
+        ("farsighter", {"preset": "general", "k": 3}),  # its random features resume with it
         ("rnd", {"preset": "general"}),
     ],
 )

@@ -60,8 +60,6 @@ def supports(cfg: Config, obs_space: gym.Space | None, device: torch.device) -> 
     """Why ``cfg`` cannot train as a seed batch here ('' when it can)."""
     if cfg.adaptive_k.enabled:
         return "adaptive k trains its seeds one at a time (each seed's k moves on its own)"
-    if cfg.blr.random_features:
-        return "blr.random_features trains its seeds one at a time (its torso does not stack)"
     return stack_refusal(cfg, obs_space)
 
 
