@@ -59,12 +59,8 @@ def _config(
     env: str, steps: int, values: dict[str, Any], tmp: str, threads: int, algo: str = "ddqn"
 ) -> Any:
     """``algo`` on ``env`` as every entry runs it: CPU, no evaluation before the final one,
-    quiet. Farsighter over its learned features alone: the general preset's random-feature
-    torso does not stack, and its seeds would train one at a time."""
+    quiet (Farsighter with its defaults: the random-feature torso of the general preset)."""
     from farsighter import make_config
-
-    if algo == "farsighter":
-        values = {"blr.random_features": 0, **values}
 
     return make_config(
         algo,
