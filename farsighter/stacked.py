@@ -187,9 +187,10 @@ class StackedQNetwork(nn.Module):
         self._params = list(self.weights)  # a move may replace the tensors
         return self
 
-    def forward(self, obs_SB: torch.Tensor) -> torch.Tensor:
+    def forward(self, obs_SB: torch.Tensor, psi_SBW: torch.Tensor | None = None) -> torch.Tensor:
         """Q (S, B, A) (features (S, B, D) of torsos) of each seed on its own rows (one seed's
-        network alone: :meth:`member_forward`)."""
+        network alone: :meth:`member_forward`). ``psi_SBW``: the random features of these rows
+        when already computed (:meth:`psi`; an online torso and its target share them)."""
         x = inputs = obs_SB.float().flatten(2)
         layers = list(zip(self._params[0::2], self._params[1::2], strict=True))
         relu = torch.relu if torch.is_grad_enabled() else torch.relu_  # in place: stays aligned
@@ -198,11 +199,16 @@ class StackedQNetwork(nn.Module):
         weight, bias = layers[-1]  # the linear head, or the torso's last layer
         x = stacked_linear(x, weight, bias)
         if self.rf_width:  # RandomFeatureTorso.body: [learned features, psi(s)]
-            psi = self.random_features(inputs)
+            psi = self.random_features(inputs) if psi_SBW is None else psi_SBW
             return aligned(torch.cat([relu(x), psi], dim=2))
         # features: each seed's slice aligned as a tensor alone (the seeds' own products with
         # them round as the agent alone's do)
         return aligned(relu(x)) if self.relu_last else x
+
+    def psi(self, obs_SB: torch.Tensor) -> torch.Tensor | None:
+        """The random features of observations (None without a random layer), for
+        :meth:`forward` of this network and of its target."""
+        return self.random_features(obs_SB.float().flatten(2)) if self.rf_width else None
 
     def random_features(self, x_SBO: torch.Tensor) -> torch.Tensor:
         """Each seed's psi(s) = relu(W s + b) / sqrt(width) on its own rows, (S, B, width)

@@ -205,6 +205,49 @@ def test_checkpoint_round_trip_samples_identically() -> None:
     assert np.array_equal(x.index, y.index) and np.array_equal(x.returns, y.returns)
 
 
+def test_checkpoint_holds_the_written_slots_and_loads_over_a_used_replay() -> None:
+    """A replay larger than its run saves the slots written so far; loaded over a replay that
+    holds other rows, it gives back the saved replay exactly (later slots zero again)."""
+    a = ReplayBuffer(1_000, (1,), np.float32, num_envs=2, seed=1)
+    for t in range(40):
+        a.add(
+            np.array([[t], [-t]], np.float32),
+            np.array([0, 1]),
+            np.array([1.0, 2.0]),
+            np.array([False, False]),
+            np.array([False, False]),
+            None,
+        )
+    state = a.state_dict()
+    assert state["frames"].shape == (2, 40, 1) and state["t_ep"].shape == (2, 40)
+    used = ReplayBuffer(1_000, (1,), np.float32, num_envs=2, seed=5)
+    fill_two = np.full((2, 1), 7.0, np.float32)
+    for _ in range(300):
+        used.add(
+            fill_two,
+            np.array([2, 2]),
+            np.array([3.0, 3.0]),
+            np.array([False, False]),
+            np.array([True, True]),
+            [fill_two[0], fill_two[1]],
+        )
+    used.load_state_dict(state)
+    for key in ("frames", "actions", "rewards", "flags", "t_ep", "count", "floor"):
+        assert np.array_equal(getattr(used, key), getattr(a, key)), key
+    # a full replay saves every slot; a checkpoint of full arrays (older versions) loads
+    full = ReplayBuffer(30, (1,), np.float32, seed=1)
+    fill(full, [(45, "term")])
+    assert full.state_dict()["frames"].shape == (1, 30, 1)
+    big = ReplayBuffer(1_000, (1,), np.float32, seed=1)
+    old = a.state_dict() | {k: getattr(a, k).copy() for k in ("frames", "actions", "rewards")}
+    old |= {k: getattr(a, k).copy() for k in ("flags", "t_ep")}
+    with pytest.raises(ValueError, match="replay 'frames' has shape"):
+        big.load_state_dict(old)  # two streams into one
+    one = ReplayBuffer(1_000, (1,), np.float32, num_envs=2, seed=9)
+    one.load_state_dict(old)
+    assert np.array_equal(one.frames, a.frames)
+
+
 @pytest.mark.parametrize("span", [[7], [3, 0, 5], [0, 4], [2, 2, 2, 9]])
 def test_row_draws_are_generator_choice_without_its_checks(span: list[int]) -> None:
     """The sampler draws streams as Generator.choice(p=span / total) does, draw for draw, so

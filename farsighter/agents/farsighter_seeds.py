@@ -171,9 +171,10 @@ class SeedBatchFarsighter:
             features: Features = {}
             for prefix, end_B in ends.items():
                 next_SB = by_seed(inputs[prefix + "next_obs_B"])
+                psi = self.torso.psi(next_SB)  # online and target share the random layer
                 features[prefix] = (
-                    self.torso(next_SB),
-                    self._target_features(next_SB, end_B, batch),
+                    self.torso(next_SB, psi),
+                    self._target_features(next_SB, end_B, batch, psi),
                 )
         seeded = [{key: by_seed(x)[s] for key, x in inputs.items()} for s in range(S)]
         ys = [
@@ -199,12 +200,17 @@ class SeedBatchFarsighter:
         return [loss.detach() for loss in losses]
 
     def _target_features(
-        self, next_SB: torch.Tensor, end_B: np.ndarray, batch: Batch
+        self,
+        next_SB: torch.Tensor,
+        end_B: np.ndarray,
+        batch: Batch,
+        psi: torch.Tensor | None = None,
     ) -> torch.Tensor | list[torch.Tensor]:
-        """phi_target(s') of every seed: one batched forward, or each seed's target cache
-        (``CachedTarget``'s lookup, the misses through its own target torso alone)."""
+        """phi_target(s') of every seed: one batched forward (over the online torso's random
+        features ``psi`` of s'), or each seed's target cache (``CachedTarget``'s lookup, the
+        misses through its own target torso alone)."""
         if self.parts[0].cache is None:
-            return self.torso_target(next_SB)
+            return self.torso_target(next_SB, psi)
         B, E = self.cfg.batch_size, self.cfg.num_envs
         return [  # each seed's own streams, numbered as alone
             p.target_features(

@@ -45,6 +45,8 @@ TERMINATED = np.uint8(1)
 TRUNCATED = np.uint8(2)
 FINAL = np.uint8(4)
 MIRROR_CHUNK = 65_536  # rows per copy when a loaded replay fills its device mirror
+SLOT_ARRAYS = ("frames", "actions", "rewards", "flags", "t_ep")
+"""The arrays with a row per stream and slot."""
 
 
 @dataclass(frozen=True)
@@ -555,27 +557,17 @@ class ReplayBuffer:
 
     # ------------------------------------------------------------------ checkpointing
     def state_dict(self) -> dict[str, Any]:
-        state: dict[str, Any] = {
-            "frames": self.frames,
-            "actions": self.actions,
-            "rewards": self.rewards,
-            "flags": self.flags,
-            "t_ep": self.t_ep,
-            "count": self.count,
-            "episode_t": self.episode_t,
-            "floor": self.floor,
-            "rng": self.rng.bit_generator.state,
-        }
+        state: dict[str, Any] = self.slots_state(slice(None))
+        state.update(
+            count=self.count,
+            episode_t=self.episode_t,
+            floor=self.floor,
+            rng=self.rng.bit_generator.state,
+        )
         return state
 
     def load_state_dict(self, state: dict[str, Any]) -> None:
-        for key in ("frames", "actions", "rewards", "flags", "t_ep"):
-            src = np.asarray(state[key])
-            if src.shape != getattr(self, key).shape:
-                raise ValueError(
-                    f"replay '{key}' has shape {src.shape}, expected {getattr(self, key).shape}"
-                )
-            getattr(self, key)[...] = src
+        self.load_slots(slice(None), state)
         self.count[...] = state["count"]
         self.episode_t[...] = state["episode_t"]
         self.floor[...] = state["floor"]
@@ -584,6 +576,33 @@ class ReplayBuffer:
             rows = self.num_envs * self.capacity
             for lo in range(0, rows, MIRROR_CHUNK):
                 self._to_mirror(np.arange(lo, min(lo + MIRROR_CHUNK, rows), dtype=np.int64))
+
+    def slots_state(self, streams: slice) -> dict[str, np.ndarray]:
+        """The row arrays of ``streams`` (:data:`SLOT_ARRAYS`), cut to the slots written so far.
+        A stream's logical row r lands in slot r mod capacity, so the slots from the largest
+        count on still hold the zeros they were made with and a checkpoint need not carry them:
+        a 100k-row replay after 10k steps saves 10k rows a stream, not 100k."""
+        n = min(int(self.count[streams].max(initial=0)), self.capacity)
+        return {key: getattr(self, key)[streams, :n].copy() for key in SLOT_ARRAYS}
+
+    def load_slots(self, streams: slice, state: dict[str, Any]) -> None:
+        """Inverse of :meth:`slots_state`: the saved slots, zeros after them (a checkpoint of
+        full arrays, as earlier versions wrote, loads too)."""
+        for key in SLOT_ARRAYS:
+            target = getattr(self, key)[streams]  # a view of the streams
+            src = np.asarray(state[key])
+            if (
+                src.ndim != target.ndim
+                or src.shape[0] != target.shape[0]
+                or src.shape[2:] != target.shape[2:]
+                or src.shape[1] > self.capacity
+            ):
+                raise ValueError(
+                    f"replay '{key}' has shape {src.shape}, expected {target.shape} "
+                    f"(or fewer than {self.capacity} slots)"
+                )
+            target[:, : src.shape[1]] = src
+            target[:, src.shape[1] :] = 0
 
 
 def host_to_device(x: torch.Tensor, device: torch.device | str) -> torch.Tensor:

@@ -18,7 +18,7 @@ import numpy as np
 from farsighter.errors import ConfigError
 from farsighter.replay.buffer import Batch, ReplayBuffer, VectorStep
 
-_PER_STREAM = ("frames", "actions", "rewards", "flags", "t_ep", "count", "episode_t", "floor")
+_PER_STREAM = ("count", "episode_t", "floor")  # with the slot arrays (ReplayBuffer.slots_state)
 
 
 class SeedReplay(ReplayBuffer):
@@ -126,13 +126,16 @@ class SeedReplay(ReplayBuffer):
     def member_state(self, s: int) -> dict[str, Any]:
         """Seed ``s``'s replay as :meth:`ReplayBuffer.state_dict` of its replay alone."""
         streams = self.seed_streams(s)
-        state: dict[str, Any] = {key: getattr(self, key)[streams].copy() for key in _PER_STREAM}
+        state: dict[str, Any] = self.slots_state(streams)
+        for key in _PER_STREAM:
+            state[key] = getattr(self, key)[streams].copy()
         state["rng"] = self.rngs[s].bit_generator.state
         return state
 
     def load_member(self, s: int, state: dict[str, Any]) -> None:
         """Inverse of :meth:`member_state` (a replay alone's ``state_dict``)."""
         streams = self.seed_streams(s)
+        self.load_slots(streams, state)
         for key in _PER_STREAM:
             target = getattr(self, key)[streams]
             src = np.asarray(state[key])
