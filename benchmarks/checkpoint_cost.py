@@ -2,7 +2,7 @@
 
 A small task's replay is allocated for the whole run (the general preset: 100k transitions), but a
 checkpoint before the buffer fills holds only the slots written so far
-(:meth:`farsighter.replay.ReplayBuffer.slots_state`). Each task trains one short run with the
+(:meth:`farsighter.replay.ReplayBuffer.streams_state`). Each task trains one short run with the
 library's defaults (checkpoints every ``--every`` steps, the last one at the end), timing every
 checkpoint the run writes; then, side by side in the same process, writes the run's replay once
 in the layout of earlier versions (every slot of the preallocated arrays) and once as it is saved

@@ -5,6 +5,7 @@ import pytest
 
 from farsighter.errors import ConfigError
 from farsighter.replay import ReplayBuffer
+from farsighter.replay.buffer import SLOT_ARRAYS
 
 G = 0.5
 
@@ -239,8 +240,7 @@ def test_checkpoint_holds_the_written_slots_and_loads_over_a_used_replay() -> No
     fill(full, [(45, "term")])
     assert full.state_dict()["frames"].shape == (1, 30, 1)
     big = ReplayBuffer(1_000, (1,), np.float32, seed=1)
-    old = a.state_dict() | {k: getattr(a, k).copy() for k in ("frames", "actions", "rewards")}
-    old |= {k: getattr(a, k).copy() for k in ("flags", "t_ep")}
+    old = a.state_dict() | {k: getattr(a, k).copy() for k in SLOT_ARRAYS}
     with pytest.raises(ValueError, match="replay 'frames' has shape"):
         big.load_state_dict(old)  # two streams into one
     one = ReplayBuffer(1_000, (1,), np.float32, num_envs=2, seed=9)

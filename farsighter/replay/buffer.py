@@ -47,6 +47,8 @@ FINAL = np.uint8(4)
 MIRROR_CHUNK = 65_536  # rows per copy when a loaded replay fills its device mirror
 SLOT_ARRAYS = ("frames", "actions", "rewards", "flags", "t_ep")
 """The arrays with a row per stream and slot."""
+STREAM_ARRAYS = ("count", "episode_t", "floor")
+"""The arrays with a value per stream."""
 
 
 @dataclass(frozen=True)
@@ -557,37 +559,28 @@ class ReplayBuffer:
 
     # ------------------------------------------------------------------ checkpointing
     def state_dict(self) -> dict[str, Any]:
-        state: dict[str, Any] = self.slots_state(slice(None))
-        state.update(
-            count=self.count,
-            episode_t=self.episode_t,
-            floor=self.floor,
-            rng=self.rng.bit_generator.state,
-        )
-        return state
+        return {**self.streams_state(slice(None)), "rng": self.rng.bit_generator.state}
 
     def load_state_dict(self, state: dict[str, Any]) -> None:
-        self.load_slots(slice(None), state)
-        self.count[...] = state["count"]
-        self.episode_t[...] = state["episode_t"]
-        self.floor[...] = state["floor"]
+        self.load_streams(slice(None), state)
         self.rng.bit_generator.state = state["rng"]
         if self.mirror is not None:  # in chunks: no pinned copy of the whole replay at once
             rows = self.num_envs * self.capacity
             for lo in range(0, rows, MIRROR_CHUNK):
                 self._to_mirror(np.arange(lo, min(lo + MIRROR_CHUNK, rows), dtype=np.int64))
 
-    def slots_state(self, streams: slice) -> dict[str, np.ndarray]:
-        """The row arrays of ``streams`` (:data:`SLOT_ARRAYS`), cut to the slots written so far.
-        A stream's logical row r lands in slot r mod capacity, so the slots from the largest
-        count on still hold the zeros they were made with and a checkpoint need not carry them:
-        a 100k-row replay after 10k steps saves 10k rows a stream, not 100k."""
+    def streams_state(self, streams: slice) -> dict[str, np.ndarray]:
+        """The arrays of ``streams`` (copies), the slot arrays (:data:`SLOT_ARRAYS`) cut to the
+        slots written so far. A stream's logical row r lands in slot r mod capacity, so the slots
+        from the largest count on still hold the zeros they were made with and a checkpoint need
+        not carry them: a 100k-row replay after 10k steps saves 10k rows a stream, not 100k."""
         n = min(int(self.count[streams].max(initial=0)), self.capacity)
-        return {key: getattr(self, key)[streams, :n].copy() for key in SLOT_ARRAYS}
+        state = {key: getattr(self, key)[streams, :n].copy() for key in SLOT_ARRAYS}
+        return state | {key: getattr(self, key)[streams].copy() for key in STREAM_ARRAYS}
 
-    def load_slots(self, streams: slice, state: dict[str, Any]) -> None:
-        """Inverse of :meth:`slots_state`: the saved slots, zeros after them (a checkpoint of
-        full arrays, as earlier versions wrote, loads too)."""
+    def load_streams(self, streams: slice, state: dict[str, Any]) -> None:
+        """Inverse of :meth:`streams_state`: the saved slots, zeros after them (a checkpoint of
+        full arrays, as earlier versions wrote, loads too), and the streams' counters."""
         for key in SLOT_ARRAYS:
             target = getattr(self, key)[streams]  # a view of the streams
             src = np.asarray(state[key])
@@ -603,6 +596,12 @@ class ReplayBuffer:
                 )
             target[:, : src.shape[1]] = src
             target[:, src.shape[1] :] = 0
+        for key in STREAM_ARRAYS:
+            target = getattr(self, key)[streams]
+            src = np.asarray(state[key])
+            if src.shape != target.shape:
+                raise ValueError(f"replay '{key}' has shape {src.shape}, expected {target.shape}")
+            target[...] = src
 
 
 def host_to_device(x: torch.Tensor, device: torch.device | str) -> torch.Tensor:

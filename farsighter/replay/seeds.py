@@ -18,8 +18,6 @@ import numpy as np
 from farsighter.errors import ConfigError
 from farsighter.replay.buffer import Batch, ReplayBuffer, VectorStep
 
-_PER_STREAM = ("count", "episode_t", "floor")  # with the slot arrays (ReplayBuffer.slots_state)
-
 
 class SeedReplay(ReplayBuffer):
     """S replays of ``capacity`` rows over ``num_envs`` streams each, seeded by ``seeds``."""
@@ -125,23 +123,12 @@ class SeedReplay(ReplayBuffer):
 
     def member_state(self, s: int) -> dict[str, Any]:
         """Seed ``s``'s replay as :meth:`ReplayBuffer.state_dict` of its replay alone."""
-        streams = self.seed_streams(s)
-        state: dict[str, Any] = self.slots_state(streams)
-        for key in _PER_STREAM:
-            state[key] = getattr(self, key)[streams].copy()
-        state["rng"] = self.rngs[s].bit_generator.state
-        return state
+        return {**self.streams_state(self.seed_streams(s)), "rng": self.rngs[s].bit_generator.state}
 
     def load_member(self, s: int, state: dict[str, Any]) -> None:
         """Inverse of :meth:`member_state` (a replay alone's ``state_dict``)."""
         streams = self.seed_streams(s)
-        self.load_slots(streams, state)
-        for key in _PER_STREAM:
-            target = getattr(self, key)[streams]
-            src = np.asarray(state[key])
-            if src.shape != target.shape:
-                raise ValueError(f"replay '{key}' has shape {src.shape}, expected {target.shape}")
-            target[...] = src
+        self.load_streams(streams, state)
         self.rngs[s].bit_generator.state = state["rng"]
         if self.mirror is not None:
             rows = np.arange(streams.start * self.capacity, streams.stop * self.capacity)
