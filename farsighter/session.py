@@ -7,6 +7,7 @@ from __future__ import annotations
 
 import json
 import pickle
+import sys
 import time
 from collections import deque
 from collections.abc import Mapping, Sequence
@@ -27,6 +28,7 @@ from farsighter.rundir import SUMMARY_FILE, RunLogger, load_checkpoint, save_che
 POLICY_FILE = "policy.pt"  # the trained agent without its replay, for acting
 CHECKPOINT_VERSION = 2  # 2: agents save their counters as one dataclass (v0.3)
 RECENT = 20  # episodes in the progress bar's and the summary's recent mean
+NO_EPISODE_NOTICE = 10_000  # steps without one ended episode after which the run says so, once
 
 
 class Callback(Protocol):
@@ -280,6 +282,22 @@ def finished_episodes(info: dict[str, Any]) -> list[tuple[float, int, float | No
     ]
 
 
+def no_episode_notice(cfg: Config, step: int) -> str:
+    """The line a run prints once when ``step`` steps have ended no episode: with a hint when
+    the environment has no time limit of its own and none was given."""
+    line = f"farsighter: no episode of {cfg.env} has ended in {step:,} steps"
+    try:
+        limit = gym.spec(cfg.env).max_episode_steps
+    except gym.error.Error:  # module:EnvId, or an id registered by its own package on make
+        limit = -1
+    if limit is None and not cfg.max_episode_steps:
+        line += (
+            f"; {cfg.env} has no time limit, so an episode lasts until the task ends it: give "
+            "one with --max-episode-steps N"
+        )
+    return line
+
+
 class RunLog:
     """Episode rows, log-interval scalars (SPS, loss, diagnostics), evaluations, the progress
     bar and the summary of one run; reopened consistently on resume."""
@@ -305,6 +323,7 @@ class RunLog:
         self.next_log = (state.global_step // cfg.log_every + 1) * cfg.log_every
         self.sps = 0.0
         self.last_loss: torch.Tensor | None = None
+        self.noticed = False
 
     def step(
         self, state: LoopState, info: dict[str, Any], metrics: dict[str, torch.Tensor], agent: Agent
@@ -365,6 +384,9 @@ class RunLog:
             log.scalar(f"charts/{name}", value, step)
         recent = np.mean(state.recent_returns) if state.recent_returns else float("nan")
         self.bar.set_postfix(SPS=f"{self.sps:.0f}", ret=f"{recent:.1f}", refresh=False)
+        if state.episodes == 0 and step >= NO_EPISODE_NOTICE and not self.noticed:
+            self.noticed = True
+            tqdm.write(no_episode_notice(self.cfg, step), file=sys.stderr)
 
     def evaluate(self, state: LoopState, agent: Agent) -> None:
         """One evaluation phase: eval.csv, eval_success.csv (goal tasks) and TensorBoard."""

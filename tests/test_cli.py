@@ -97,6 +97,11 @@ def test_train_eval_and_presets(tmp_path: Path) -> None:
         (["--eval-every", "-1"], "eval_every must be >= 0 (0: no periodic evaluation; got -1)"),
         (["--eval-max-steps", "0"], "eval_max_steps must be >= 1 (got 0)"),
         (["--log-every", "0"], "log_every must be >= 1 (got 0)"),
+        (["--max-episode-steps", "-1"], "max_episode_steps must be >= 0"),
+        (
+            ["--env", "ALE/Pong-v5", "--max-episode-steps", "100"],
+            "max_episode_steps is for non-ALE",
+        ),
     ],
 )
 def test_bad_input_is_one_line_exit_2(tmp_path: Path, args: list[str], needle: str) -> None:

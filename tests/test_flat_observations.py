@@ -64,3 +64,50 @@ def test_a_tabular_task_trains_and_its_saved_policy_acts(tmp_path: Path, algo: s
     obs, _ = env.reset(seed=1)
     action = policy.act(obs[None])
     assert action.shape == (1,) and 0 <= int(action[0]) < 4
+
+
+class NeverEnds(gym.Env):  # type: ignore[type-arg]
+    """A task with no end of its own: a walk on a line that no action finishes."""
+
+    observation_space = gym.spaces.Box(-1.0, 1.0, (1,), np.float32)
+    action_space = gym.spaces.Discrete(2)
+
+    def reset(self, *, seed: int | None = None, options: Any = None) -> tuple[Any, dict[str, Any]]:
+        super().reset(seed=seed)
+        self.x = 0.0
+        return np.array([self.x], np.float32), {}
+
+    def step(self, action: Any) -> tuple[Any, float, bool, bool, dict[str, Any]]:
+        self.x = float(np.clip(self.x + (0.1 if action else -0.1), -1.0, 1.0))
+        return np.array([self.x], np.float32), -1.0, False, False, {}
+
+
+def test_a_time_limit_ends_the_episodes_of_a_task_that_has_none(
+    tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    """A task registered without a time limit (as CliffWalking-v1 is) and that no policy ends:
+    the run says so once, with the flag to use; with ``max_episode_steps`` every training and
+    evaluation episode ends at the limit, truncated (so the loop bootstraps from its last
+    state), and CliffWalking-v1's own environments take it too."""
+    env_id = "FarsighterTests/NeverEnds-v0"
+    if env_id not in gym.registry:
+        gym.register(env_id, entry_point=NeverEnds)
+    common: dict[str, Any] = {"learning_starts": 20_000, "eval_max_steps": 300}
+    summary = train(tiny("ddqn", tmp_path / "none", env=env_id, total_steps=10_500, **common))
+    err = capsys.readouterr().err
+    assert summary["episodes"] == 0
+    assert err.count(f"no episode of {env_id} has ended in 10,000 steps") == 1
+    assert "has no time limit" in err and "give one with --max-episode-steps N" in err
+    run = tmp_path / "limited"
+    cfg = tiny("ddqn", run, env=env_id, total_steps=1_000, max_episode_steps=40, **common)
+    assert train(cfg)["episodes"] == 1_000 // 40
+    lengths = np.loadtxt(run / "metrics.csv", delimiter=",", skiprows=1, usecols=3)
+    assert set(lengths.tolist()) == {40.0}
+    evals = np.loadtxt(run / "eval.csv", delimiter=",", skiprows=1, usecols=1)
+    assert set(evals.tolist()) == {-40.0}  # not eval_max_steps' -300
+    assert "no episode" not in capsys.readouterr().err
+    cliff = make_env(tiny("ddqn", run, env="CliffWalking-v1", max_episode_steps=40), seed=0)
+    cliff.reset(seed=0)
+    for t in range(1, 41):
+        _, _, terminated, truncated, _ = cliff.step(0)  # up from the start, then at the wall
+        assert not terminated and truncated == (t == 40)

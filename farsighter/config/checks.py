@@ -7,6 +7,7 @@ from __future__ import annotations
 
 from farsighter import algorithms
 from farsighter.config.fields import Config
+from farsighter.config.presets import is_atari_id
 from farsighter.errors import ConfigError
 
 
@@ -67,5 +68,10 @@ def _algorithm_checks(cfg: Config, spec: algorithms.Algorithm) -> list[tuple[boo
         (
             spec.actions != "continuous" or n.elbo_batch <= cfg.buffer_size,
             f"naf.elbo_batch ({n.elbo_batch}) must not exceed buffer_size ({cfg.buffer_size})",
+        ),
+        (
+            not (cfg.max_episode_steps and is_atari_id(cfg.env)),
+            "max_episode_steps is for non-ALE ids; an ALE game's episodes are capped by "
+            "atari.max_frames_per_episode (in frames)",
         ),
     ]

@@ -456,6 +456,12 @@ class Config:
     """Delete an existing run_dir and start afresh."""
     num_envs: int = 1
     """Environments stepped together (acting is batched over them)."""
+    max_episode_steps: int = 0
+    """Time limit of an episode, in agent steps, for the training and evaluation environments
+    (``gymnasium.make(env, max_episode_steps=N)``, which truncates the episode); 0 keeps the
+    environment's own. A task registered without one (CliffWalking-v1) otherwise runs each
+    episode until the task itself ends it, which an agent that has not yet learned the way may
+    never do. Not for ALE ids (atari.max_frames_per_episode caps those)."""
 
     # ----- learning (paper Table 1 unless noted) -----
     optimizer: Literal["rmsprop", "adam"] = "rmsprop"
@@ -563,6 +569,11 @@ class Config:
             ),
             (self.total_steps > 0, f"total_steps must be > 0 (got {self.total_steps})"),
             (self.num_envs >= 1, f"num_envs must be >= 1 (got {self.num_envs})"),
+            (
+                self.max_episode_steps >= 0,
+                "max_episode_steps must be >= 0 (0: the environment's own time limit; got "
+                f"{self.max_episode_steps})",
+            ),
             (0.0 <= self.gamma <= 1.0, f"gamma must be in [0, 1] (got {self.gamma})"),
             (self.train_every >= 1, f"train_every must be >= 1 (got {self.train_every})"),
             (

@@ -103,6 +103,8 @@ def _make_base(env_id: str, cfg: Config, render_mode: str | None) -> gym.Env:
         kwargs["frameskip"] = 1
         kwargs["repeat_action_probability"] = cfg.atari.repeat_action_probability
         kwargs["max_num_frames_per_episode"] = cfg.atari.max_frames_per_episode
+    elif cfg.max_episode_steps:
+        kwargs["max_episode_steps"] = cfg.max_episode_steps
     try:
         return gym.make(env_id, **kwargs)
     except gym.error.DependencyNotInstalled as exc:
