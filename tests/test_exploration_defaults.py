@@ -146,6 +146,44 @@ def test_sample_target_adds_the_rows_noise(tmp_path: Path) -> None:
     torch.testing.assert_close(shifted, 1 + 0.5 * (q_t + sd).gather(1, a_up[:, None])[:, 0])
 
 
+def test_centred_sample_target_takes_out_the_minibatch_mean_optimism(tmp_path: Path) -> None:
+    """blr.center_sample: the target the update trains on is the raw sampled target less each
+    row's bootstrap factor times the minibatch's optimism per unit of bootstrap. So its
+    optimism over the rows sums to zero, a row that ends the episode keeps r, and two rows keep
+    the difference of their raw optimism per unit of bootstrap (a missing subtraction, a wrong
+    weight or terminal rows shifted each fail)."""
+    agent = make_agent(tmp_path, **{"blr.target": "sample", "blr.center_sample": True, "k": 1})
+    raw_loss = make_agent(tmp_path, **{"blr.target": "sample", "k": 1}).loss
+    loss = agent.loss
+    raw_loss.torso.load_state_dict(loss.torso.state_dict())
+    raw_loss.torso_target.load_state_dict(loss.torso_target.state_dict())
+    raw_loss.target_mean_AD.copy_(loss.target_mean_AD)
+    g = torch.Generator().manual_seed(3)
+    bootstrap = torch.tensor([0.99, 0.5, 0.0, 0.99, 0.25, 0.0])
+    t = farsighter_module.TensorBatch(
+        obs_B=torch.randn(6, 4, generator=g),
+        next_obs_B=torch.randn(6, 4, generator=g),
+        actions_B=torch.zeros(6, dtype=torch.long),
+        returns_B=torch.randn(6, generator=g),
+        bootstrap_B=bootstrap,
+    )
+    eps = torch.randn(6, 2, generator=g).abs() + 0.5  # every draw optimistic: a mean above 0
+    y = loss.targets(t, {"eps_BA": eps})
+    y_raw = raw_loss.targets(t, {"eps_BA": eps})
+    y_mean = raw_loss.targets(t, {"eps_BA": torch.zeros(6, 2)})
+    assert float((y_raw - y_mean).sum()) > 0.01  # the raw draw is a bonus ...
+    assert abs(float((y - y_mean).sum())) < 1e-5  # ... the centred one sums to none
+    ends = bootstrap == 0
+    torch.testing.assert_close(y[ends], t.returns_B[ends])
+    per_unit = ((y - y_mean) / bootstrap)[~ends] - ((y_raw - y_mean) / bootstrap)[~ends]
+    torch.testing.assert_close(per_unit, per_unit[:1].expand_as(per_unit))  # one shift for all
+    # and the update trains on it: the loss of the minibatch is Eq. 8's error against y
+    inputs = {**{f: getattr(t, f) for f in ("obs_B", "next_obs_B", "actions_B")}}
+    inputs |= {"returns_B": t.returns_B, "bootstrap_B": t.bootstrap_B, "eps_BA": eps}
+    q = (loss.torso(t.obs_B) @ agent.head.mean_AD.T)[:, 0]
+    torch.testing.assert_close(loss(inputs)["loss"], td_loss(q, y, agent.cfg.loss))
+
+
 # ------------------------------------------------------------------ the agent
 def make_agent(tmp_path: Path, algo: str = "farsighter", **kw: object) -> FarsighterAgent:
     cfg = tiny(algo, tmp_path, **{"learning_starts": 0, **kw})

@@ -3,7 +3,7 @@
 import numpy as np
 import torch
 
-from farsighter.ops.targets import double_q_target, nstep_returns
+from farsighter.ops.targets import centered_optimism, double_q_target, nstep_returns
 
 G = 0.9
 
@@ -98,3 +98,15 @@ def test_clip_gradients_gives_clip_grad_norm_s_numbers() -> None:
         )
         after = nn.utils.get_total_norm([p.grad for p in other.parameters()])
         assert after <= 10.0 + 1e-4 and (before > 10.0 or torch.equal(after, before))
+
+
+def test_centered_optimism_sums_to_zero_and_leaves_ends_alone() -> None:
+    y_mean = torch.tensor([1.0, 2.0, 3.0, 4.0])
+    bonus = torch.tensor([0.4, 0.1, 0.0, 0.7])
+    bootstrap = torch.tensor([0.9, 0.45, 0.0, 0.9])
+    out = centered_optimism(y_mean + bonus, y_mean, bootstrap)
+    # (0.4 + 0.1 + 0.7) / (0.9 + 0.45 + 0.9) = 1.2 / 2.25 per unit of bootstrap
+    torch.testing.assert_close(out, y_mean + bonus - bootstrap * (1.2 / 2.25))
+    assert abs(float((out - y_mean).sum())) < 1e-6 and out[2] == 3.0
+    none = torch.zeros(4)  # nothing bootstraps: nothing to centre
+    torch.testing.assert_close(centered_optimism(y_mean + bonus, y_mean, none), y_mean + bonus)

@@ -33,7 +33,7 @@ from farsighter.agents.learner import CachedTarget
 from farsighter.config import Config
 from farsighter.networks import Torso, online_and_target
 from farsighter.ops.blr import BLRHead
-from farsighter.ops.targets import double_q_target
+from farsighter.ops.targets import centered_optimism, double_q_target
 from farsighter.replay import Batch, ReplayBuffer
 from farsighter.replay.target_cache import TargetCache
 
@@ -69,7 +69,14 @@ class FarsighterLoss:
         else:
             phi_next = self.torso(t.next_obs_B)
         return eq8_targets(
-            self.head, self.target_mean_AD, self.blr.target, t, phi_next, phi_next_target, draws
+            self.head,
+            self.target_mean_AD,
+            self.blr.target,
+            t,
+            phi_next,
+            phi_next_target,
+            draws,
+            self.blr.center_sample,
         )
 
     @torch.no_grad()
@@ -137,17 +144,24 @@ def eq8_targets(
     phi_next: torch.Tensor,
     phi_next_target: torch.Tensor,
     draws: Tensors,
+    centered: bool = False,
 ) -> torch.Tensor:
     """y of Eq. 8 from the online and target features of s' (``kind``: ``blr.target``): the
     double-Q target under the posterior mean (or the acting draw ``w_online_AD``), with the
-    per-row posterior noise of ``eps_BA`` added to both Q's for ``sample``."""
+    per-row posterior noise of ``eps_BA`` added to both Q's for ``sample`` (``centered``:
+    ``blr.center_sample``, the minibatch's mean optimism taken out)."""
     q_next_online = phi_next @ draws.get("w_online_AD", head.mean_AD).T
     q_next_target = phi_next_target @ target_mean_AD.T
-    if kind == "sample":
-        noise_BA = head.q_noise_rows(phi_next_target, draws["eps_BA"])
-        q_next_online = q_next_online + noise_BA
-        q_next_target = q_next_target + noise_BA
-    return double_q_target(t.returns_B, t.bootstrap_B, q_next_online, q_next_target)
+    if kind != "sample":
+        return double_q_target(t.returns_B, t.bootstrap_B, q_next_online, q_next_target)
+    noise_BA = head.q_noise_rows(phi_next_target, draws["eps_BA"])
+    y_B = double_q_target(
+        t.returns_B, t.bootstrap_B, q_next_online + noise_BA, q_next_target + noise_BA
+    )
+    if not centered:
+        return y_B
+    y_mean_B = double_q_target(t.returns_B, t.bootstrap_B, q_next_online, q_next_target)
+    return centered_optimism(y_B, y_mean_B, t.bootstrap_B)
 
 
 def max_targets(

@@ -62,5 +62,14 @@ class SeedParts:
         self, t: TensorBatch, phi_next: torch.Tensor, phi_next_target: torch.Tensor, draws: Tensors
     ) -> torch.Tensor:
         """y of Eq. 8 under this seed's posterior and target mean."""
-        head, kind = self.head, self.cfg.blr.target
-        return eq8_targets(head, self.target_mean_AD, kind, t, phi_next, phi_next_target, draws)
+        head, blr = self.head, self.cfg.blr
+        return eq8_targets(
+            head,
+            self.target_mean_AD,
+            blr.target,
+            t,
+            phi_next,
+            phi_next_target,
+            draws,
+            blr.center_sample,
+        )

@@ -50,6 +50,14 @@ class BLRConfig:
     as in randomised value functions (Osband et al. 2019); our extension, not the paper's. With
     gamma = 1 that optimism is not discounted along loops (on the bridge maze, with the general
     posterior, Farsighter failed 2 of 2 seeds that the maze preset solves: docs/results/explore)."""
+    center_sample: bool = False
+    """With target = sample: subtract from every bootstrapped target of a minibatch the
+    minibatch's mean optimism (the draws' sum of y - y_mean over the sum of the bootstrap
+    factors, times the row's factor), so that a next state's draw raises its target by how much
+    more uncertain it is than the minibatch's next states are on average. The raw draw adds a
+    bonus at every step that does not end the episode, which on a task whose goal ends it
+    (FrozenLake) pulls the greedy policy away from the goal; centred, optimism stays where the
+    run has been least and the states it knows carry none. Our extension."""
     random_features: int = 0
     """Width of fixed random ReLU features of the observation appended to the learned features
     the posterior is over (``farsighter.networks.RandomFeatureTorso``): with them the

@@ -74,3 +74,17 @@ def double_q_target(
     a_star_B = q_next_online_BA.argmax(dim=1, keepdim=True)
     q_eval_B = q_next_target_BA.gather(1, a_star_B).squeeze(1)
     return returns_B + bootstrap_B * q_eval_B
+
+
+def centered_optimism(
+    y_B: torch.Tensor, y_mean_B: torch.Tensor, bootstrap_B: torch.Tensor
+) -> torch.Tensor:
+    """Sampled targets ``y_B`` with the minibatch's mean optimism taken out:
+    y - bootstrap * sum(y - y_mean) / sum(bootstrap), so that the optimism of the rows,
+    sum(result - y_mean), is zero, each bootstrapped row keeps its optimism relative to the
+    minibatch's, and a row that bootstraps nothing (bootstrap 0) is unchanged.
+    ``y_mean_B``: the same targets under the posterior mean (no draw)."""
+    total = bootstrap_B.sum()
+    if float(total) <= 0.0:
+        return y_B
+    return y_B - bootstrap_B * ((y_B - y_mean_B).sum() / total)

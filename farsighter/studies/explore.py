@@ -334,6 +334,9 @@ AGENTS: tuple[Agent, ...] = (
     # before it (every study in docs/results made before those)
     Agent("Farsighter (random features)", "farsighter", {"blr.random_features": 512}),
     Agent("Farsighter (learned features)", "farsighter", {"blr.random_features": 0}),
+    # the sampled target's optimism centred in each minibatch (blr.center_sample), against the
+    # default's raw draw, whose bonus at every step that does not end the episode FrozenLake shows
+    Agent("Farsighter (centred draw)", "farsighter", {"blr.center_sample": True}),
     Agent("OB2I", "ob2i"),
     Agent("RND", "rnd"),
 )
@@ -344,6 +347,7 @@ _NAMED_ONLY = (
     "Farsighter (mean, k-step target)",
     "Farsighter (random features)",
     "Farsighter (learned features)",
+    "Farsighter (centred draw)",
 )
 DEFAULT_AGENTS = tuple(a.label for a in AGENTS if a.label not in _NAMED_ONLY)
 """The default list: every agent once but those run only when named. "Farsighter (redraw k)" and
