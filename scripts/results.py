@@ -181,6 +181,34 @@ ENTRIES = (
         0,
     ),
     Entry(
+        "explore/deepsea-17-24",
+        "explore --families deepsea --sizes 17 24 --seeds 1 2 3 4 5 --agents Farsighter "
+        "--workers 1",
+        "the defaults on deep sea N = 17 and 24, between random-features' N = 20 and 30",
+        0,
+    ),
+    Entry(
+        "explore/centred-chain30",
+        "explore --families chain --sizes 30 --seeds 1 2 3 4 5 --agents 'Farsighter (centred "
+        "draw)' --workers 1",
+        "blr.center_sample (the sampled target's optimism centred per minibatch) on the chain",
+        0,
+    ),
+    Entry(
+        "explore/centred-frozenlake",
+        "explore --families frozenlake --sizes 4 --seeds 1 2 3 4 5 --agents 'Farsighter "
+        "(centred draw)' --workers 1",
+        "the same on FrozenLake 4 x 4 (the raw draw: 0/5 in random-features-tasks)",
+        0,
+    ),
+    Entry(
+        "explore/centred-deepsea",
+        "explore --families deepsea --sizes 10 14 --seeds 1 2 3 4 5 --agents 'Farsighter "
+        "(centred draw)' --workers 1",
+        "the same on deep sea N = 10 and 14",
+        0,
+    ),
+    Entry(
         "explore/doorkey",
         "explore --families doorkey --sizes 5 --seeds 1 2 3 --agents DDQN Farsighter "
         "'Farsighter (redraw revisit)'",
