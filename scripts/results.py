@@ -202,13 +202,6 @@ ENTRIES = (
         0,
     ),
     Entry(
-        "explore/centred-deepsea",
-        "explore --families deepsea --sizes 10 14 --seeds 1 2 3 4 5 --agents 'Farsighter "
-        "(centred draw)' --workers 1",
-        "the same on deep sea N = 10 and 14",
-        0,
-    ),
-    Entry(
         "explore/doorkey",
         "explore --families doorkey --sizes 5 --seeds 1 2 3 --agents DDQN Farsighter "
         "'Farsighter (redraw revisit)'",

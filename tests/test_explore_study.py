@@ -193,6 +193,7 @@ def test_agents_are_one_config_each_on_the_auto_preset(tmp_path: Path) -> None:
         "Farsighter (mean, k-step target)",
         "Farsighter (random features)",
         "Farsighter (learned features)",
+        "Farsighter (centred draw)",
         "OB2I",
         "RND",
     ]
@@ -204,10 +205,11 @@ def test_agents_are_one_config_each_on_the_auto_preset(tmp_path: Path) -> None:
         "Farsighter (mean, k-step target)",
         "Farsighter (random features)",
         "Farsighter (learned features)",
+        "Farsighter (centred draw)",
     }
     assert not named_only & set(StudyConfig().agents)
     assert "Farsighter (redraw step)" in StudyConfig().agents
-    assert len(StudyConfig().agents) == len(AGENTS) - 5
+    assert len(StudyConfig().agents) == len(AGENTS) - 6
     every = [
         run_config(a, QUICK, 3, tmp_path, (chain_id(10), 10_000))
         for a in AGENTS
@@ -229,6 +231,7 @@ def test_agents_are_one_config_each_on_the_auto_preset(tmp_path: Path) -> None:
     assert len({repr(dataclasses.replace(c, run_dir="")) for c in configs}) == len(configs)
     assert by["Farsighter"].overrides == {} and by["DDQN"].overrides == {}
     assert by["Farsighter (redraw k)"].overrides == {"blr.redraw": "k"}
+    assert by["Farsighter (centred draw)"].overrides == {"blr.center_sample": True}
     cfg = run_config(by["Farsighter (redraw step)"], QUICK, 3, tmp_path, (chain_id(10), 10_000))
     assert cfg == make_config(
         "farsighter",
