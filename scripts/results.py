@@ -202,6 +202,13 @@ ENTRIES = (
         0,
     ),
     Entry(
+        "explore/centred-deepsea",
+        "explore --families deepsea --sizes 10 14 20 --seeds 1 2 3 4 5 --agents 'Farsighter "
+        "(centred draw)' --workers 2",
+        "the same on deep sea N = 10, 14, 20 (the raw draw: 5/5, 5/5, 5/5 in random-features)",
+        0,
+    ),
+    Entry(
         "explore/doorkey",
         "explore --families doorkey --sizes 5 --seeds 1 2 3 --agents DDQN Farsighter "
         "'Farsighter (redraw revisit)'",
