@@ -12,7 +12,8 @@ unsolved verdict does not.
 ``--act-scale F`` scales the acting draw's noise only (w = mean + F sqrt(cov) z; 0 acts greedily
 on the posterior mean, 1 is the library's draw), leaving the targets' posterior noise as it is:
 an experiment on where the dithering comes from, by patching ``BLRHead.sample_weights`` in this
-process, not an option of the library.
+process, not an option of the library. ``--target-noise-scale F`` likewise scales the posterior
+noise of the sampled targets only (``BLRHead.q_noise_rows``): how much optimism they carry.
 
 Writes ``benchmarks/results/<name>.json``.
 """
@@ -73,6 +74,7 @@ def main() -> None:
     p.add_argument("--name", default="deepsea_frontier")
     p.add_argument("--set", action="append", default=[], metavar="KEY=VALUE")
     p.add_argument("--act-scale", type=float, default=1.0)
+    p.add_argument("--target-noise-scale", type=float, default=1.0)
     args = p.parse_args()
 
     from farsighter import make_config, train
@@ -94,6 +96,14 @@ def main() -> None:
             return mean + scale * (w - mean)
 
         BLRHead.sample_weights = scaled  # type: ignore[method-assign]
+    if args.target_noise_scale != 1.0:
+        noise_rows = BLRHead.q_noise_rows
+        factor = args.target_noise_scale
+
+        def louder(self: BLRHead, phi_BD: torch.Tensor, eps_BA: torch.Tensor) -> torch.Tensor:
+            return noise_rows(self, phi_BD, eps_BA).mul_(factor)
+
+        BLRHead.q_noise_rows = louder  # type: ignore[method-assign]
 
     torch.set_num_threads(1)
     n = args.size
@@ -136,6 +146,7 @@ def main() -> None:
         "agent": "farsighter (preset auto -> general)",
         "overrides": overrides,
         "act_scale": args.act_scale,
+        "target_noise_scale": args.target_noise_scale,
         "env": cfg.env,
         "seed": args.seed,
         "episodes": int(len(returns)),
