@@ -194,6 +194,8 @@ def test_agents_are_one_config_each_on_the_auto_preset(tmp_path: Path) -> None:
         "Farsighter (random features)",
         "Farsighter (learned features)",
         "Farsighter (centred draw)",
+        "Farsighter (prior 3)",
+        "Farsighter (prior 10)",
         "OB2I",
         "RND",
     ]
@@ -206,10 +208,12 @@ def test_agents_are_one_config_each_on_the_auto_preset(tmp_path: Path) -> None:
         "Farsighter (random features)",
         "Farsighter (learned features)",
         "Farsighter (centred draw)",
+        "Farsighter (prior 3)",
+        "Farsighter (prior 10)",
     }
     assert not named_only & set(StudyConfig().agents)
     assert "Farsighter (redraw step)" in StudyConfig().agents
-    assert len(StudyConfig().agents) == len(AGENTS) - 6
+    assert len(StudyConfig().agents) == len(AGENTS) - 8
     every = [
         run_config(a, QUICK, 3, tmp_path, (chain_id(10), 10_000))
         for a in AGENTS

@@ -337,6 +337,11 @@ AGENTS: tuple[Agent, ...] = (
     # the sampled target's optimism centred in each minibatch (blr.center_sample), against the
     # default's raw draw, whose bonus at every step that does not end the episode FrozenLake shows
     Agent("Farsighter (centred draw)", "farsighter", {"blr.center_sample": True}),
+    # a prior three times the noise floor (bsuite's bootstrapped DQN scales its prior functions
+    # by 3), against the default's prior equal to it: wider uncertainty where the run has not
+    # been, against the same shrinkage where it has
+    Agent("Farsighter (prior 3)", "farsighter", {"blr.prior_std": 3.0}),
+    Agent("Farsighter (prior 10)", "farsighter", {"blr.prior_std": 10.0}),
     Agent("OB2I", "ob2i"),
     Agent("RND", "rnd"),
 )
@@ -348,6 +353,8 @@ _NAMED_ONLY = (
     "Farsighter (random features)",
     "Farsighter (learned features)",
     "Farsighter (centred draw)",
+    "Farsighter (prior 3)",
+    "Farsighter (prior 10)",
 )
 DEFAULT_AGENTS = tuple(a.label for a in AGENTS if a.label not in _NAMED_ONLY)
 """The default list: every agent once but those run only when named. "Farsighter (redraw k)" and
