@@ -209,6 +209,14 @@ ENTRIES = (
         0,
     ),
     Entry(
+        "explore/prior-deepsea24",
+        "explore --families deepsea --sizes 24 --seeds 1 2 3 4 5 --agents 'Farsighter (prior 3)' "
+        "'Farsighter (prior 10)' --workers 2",
+        "a wider prior (blr.prior_std 3 and 10) on deep sea N = 24 (the defaults: 0/5 in "
+        "deepsea-17-24)",
+        0,
+    ),
+    Entry(
         "explore/doorkey",
         "explore --families doorkey --sizes 5 --seeds 1 2 3 --agents DDQN Farsighter "
         "'Farsighter (redraw revisit)'",
