@@ -108,3 +108,45 @@ def cpu_features() -> dict[str, Any]:
         "torch_cpu_capability": torch.backends.cpu.get_cpu_capability(),
         "flags": [f for f in wanted if f in flags],
     }
+
+
+def train_deep_sea(
+    size: int, episodes: int, seed: int, eval_every: int, **overrides: Any
+) -> tuple[Any, Any, list[float]]:
+    """Train Farsighter (the library's defaults plus ``overrides``) on bsuite's deep sea N =
+    ``size`` for ``episodes`` episodes (N steps each) in a temporary run directory, one torch
+    thread, no checkpoints; returns (config, trained agent, each episode's return)."""
+    import csv
+    import tempfile
+
+    from farsighter import make_config, train
+
+    torch.set_num_threads(1)
+    seen: dict[str, Any] = {}
+
+    class Keep:  # the trained agent, read after the run
+        def on_step(self, global_step: int, info: dict[str, Any], agent: Any) -> None:
+            pass
+
+        def on_finish(self, run_dir: Path, agent: Any) -> None:
+            seen["agent"] = agent
+
+    with tempfile.TemporaryDirectory() as tmp:
+        cfg = make_config(
+            "farsighter",
+            f"farsighter/DeepSea{size}-v0",
+            seed=seed,
+            total_steps=size * episodes,
+            eval_every=eval_every,
+            eval_episodes=1,
+            progress=False,
+            checkpoint_every=0,
+            save_replay=False,
+            run_dir=f"{tmp}/run",
+            torch_threads=1,
+            **overrides,
+        )
+        train(cfg, [Keep()])
+        with (Path(tmp) / "run" / "metrics.csv").open() as fh:
+            returns = [float(r["episodic_return"]) for r in csv.DictReader(fh)]
+    return cfg, seen["agent"], returns

@@ -22,17 +22,14 @@ from __future__ import annotations
 
 import argparse
 import ast
-import csv
 import math
-import tempfile
 import time
-from pathlib import Path
 from typing import Any
 
 import numpy as np
 import torch
 
-from benchmarks.common import write_result
+from benchmarks.common import train_deep_sea, write_result
 
 
 def parse_value(text: str) -> Any:
@@ -77,7 +74,6 @@ def main() -> None:
     p.add_argument("--target-noise-scale", type=float, default=1.0)
     args = p.parse_args()
 
-    from farsighter import make_config, train
     from farsighter.ops.blr import BLRHead
 
     overrides = {}
@@ -105,39 +101,19 @@ def main() -> None:
 
         BLRHead.q_noise_rows = louder  # type: ignore[method-assign]
 
-    torch.set_num_threads(1)
     n = args.size
-    seen: dict[str, Any] = {}
-
-    class Keep:  # the trained agent, read after the run
-        def on_step(self, global_step: int, info: dict[str, Any], agent: Any) -> None:
-            pass
-
-        def on_finish(self, run_dir: Path, agent: Any) -> None:
-            seen["agent"] = agent
-
-    with tempfile.TemporaryDirectory() as tmp:
-        cfg = make_config(
-            "farsighter",
-            f"farsighter/DeepSea{n}-v0",
-            seed=args.seed,
-            total_steps=n * args.episodes,
-            eval_every=n * args.episodes,
-            eval_episodes=1,
-            progress=False,
-            checkpoint_every=0,
-            save_replay=False,
-            run_dir=f"{tmp}/run",
-            torch_threads=1,
-            buffer_size=max(100_000, n * args.episodes + 1),
-            **overrides,
-        )
-        start = time.perf_counter()
-        train(cfg, [Keep()])
-        seconds = time.perf_counter() - start
-        with (Path(tmp) / "run" / "metrics.csv").open() as fh:
-            returns = np.array([float(r["episodic_return"]) for r in csv.DictReader(fh)])
-    replay = seen["agent"].replay
+    start = time.perf_counter()
+    cfg, agent, episode_returns = train_deep_sea(
+        n,
+        args.episodes,
+        args.seed,
+        n * args.episodes,
+        buffer_size=max(100_000, n * args.episodes + 1),
+        **overrides,
+    )
+    seconds = time.perf_counter() - start
+    returns = np.array(episode_returns)
+    replay = agent.replay
     rows = min(int(replay.count[0]), replay.frames.shape[1])
     reach = frontier(replay.frames[0, :rows].reshape(rows, -1), n)
     treasure = np.flatnonzero(returns > 0.5) + 1

@@ -14,15 +14,10 @@ but never visited, visited rarely (1 to 10 times) and often (more than 100 times
 from __future__ import annotations
 
 import argparse
-import csv
-import tempfile
-from pathlib import Path
-from typing import Any
 
 import numpy as np
-import torch
 
-from benchmarks.common import write_result
+from benchmarks.common import train_deep_sea, write_result
 
 
 def summary(values: np.ndarray) -> dict[str, float] | None:
@@ -47,38 +42,15 @@ def main() -> None:
     )
     args = p.parse_args()
 
-    from farsighter import make_config, train
-
-    torch.set_num_threads(1)
     n = args.size
-    seen: dict[str, Any] = {}
-
-    class Keep:  # the trained agent, read after the run
-        def on_step(self, global_step: int, info: dict[str, Any], agent: Any) -> None:
-            pass
-
-        def on_finish(self, run_dir: Path, agent: Any) -> None:
-            seen["agent"] = agent
-
-    with tempfile.TemporaryDirectory() as tmp:
-        cfg = make_config(
-            "farsighter",
-            f"farsighter/DeepSea{n}-v0",
-            seed=args.seed,
-            total_steps=n * args.episodes,
-            eval_every=max(100, 5 * n),
-            eval_episodes=1,
-            progress=False,
-            checkpoint_every=0,
-            save_replay=False,
-            run_dir=f"{tmp}/run",
-            torch_threads=1,
-            **{"blr.random_features": args.random_features},
-        )
-        train(cfg, [Keep()])
-        with (Path(tmp) / "run" / "metrics.csv").open() as fh:
-            returns = np.array([float(r["episodic_return"]) for r in csv.DictReader(fh)])
-    agent = seen["agent"]
+    cfg, agent, episode_returns = train_deep_sea(
+        n,
+        args.episodes,
+        args.seed,
+        max(100, 5 * n),
+        **{"blr.random_features": args.random_features},
+    )
+    returns = np.array(episode_returns)
     replay = agent.replay
     rows = min(int(replay.count[0]), replay.frames.shape[1])
     frames = replay.frames[0, :rows].reshape(rows, -1)
