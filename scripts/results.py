@@ -217,6 +217,13 @@ ENTRIES = (
         0,
     ),
     Entry(
+        "explore/prior10-chain30",
+        "explore --families chain --sizes 30 --seeds 1 2 3 4 5 --agents 'Farsighter (prior 10)' "
+        "--workers 2",
+        "the wider prior on the chain L = 30 (the defaults: 5/5 in random-features-tasks)",
+        0,
+    ),
+    Entry(
         "explore/doorkey",
         "explore --families doorkey --sizes 5 --seeds 1 2 3 --agents DDQN Farsighter "
         "'Farsighter (redraw revisit)'",
