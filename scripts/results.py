@@ -224,6 +224,13 @@ ENTRIES = (
         0,
     ),
     Entry(
+        "explore/prior10-frozenlake",
+        "explore --families frozenlake --sizes 4 --seeds 1 2 3 4 5 --agents 'Farsighter (prior "
+        "10)' --workers 2",
+        "the wider prior on FrozenLake 4 x 4 (the defaults: 0/5 in random-features-tasks)",
+        0,
+    ),
+    Entry(
         "explore/doorkey",
         "explore --families doorkey --sizes 5 --seeds 1 2 3 --agents DDQN Farsighter "
         "'Farsighter (redraw revisit)'",
