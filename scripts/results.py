@@ -231,6 +231,14 @@ ENTRIES = (
         0,
     ),
     Entry(
+        "explore/prior10-classic",
+        "explore --families mountaincar acrobot --seeds 1 2 3 --steps 100000 --agents "
+        "'Farsighter (prior 10)' --workers 2",
+        "the wider prior on MountainCar-v0 and Acrobot-v1 (the defaults: 3/3 and 3/3 in "
+        "random-features-classic)",
+        0,
+    ),
+    Entry(
         "explore/doorkey",
         "explore --families doorkey --sizes 5 --seeds 1 2 3 --agents DDQN Farsighter "
         "'Farsighter (redraw revisit)'",
