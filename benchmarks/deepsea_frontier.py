@@ -48,11 +48,10 @@ def frontier(frames: np.ndarray, n: int) -> dict[str, Any]:
     cell = frames.argmax(axis=1)
     row, col = cell // n, cell % n
     episode = np.cumsum(row == 0) - 1  # 0-based episode of each stored observation
-    first_episode_of_column = {}
-    for c in range(n):
-        hits = np.flatnonzero(col == c)
-        if hits.size:
-            first_episode_of_column[c] = int(episode[hits[0]]) + 1
+    columns, first = np.unique(col, return_index=True)  # each column's first observation
+    first_episode_of_column = {
+        int(c): int(episode[i]) + 1 for c, i in zip(columns, first, strict=True)
+    }
     visits = np.bincount(cell, minlength=n * n).reshape(n, n)
     reachable = np.tril(np.ones((n, n), dtype=bool))
     return {
@@ -108,8 +107,7 @@ def main() -> None:
         args.episodes,
         args.seed,
         n * args.episodes,
-        buffer_size=max(100_000, n * args.episodes + 1),
-        **overrides,
+        **{"buffer_size": max(100_000, n * args.episodes + 1), **overrides},
     )
     seconds = time.perf_counter() - start
     returns = np.array(episode_returns)
