@@ -239,6 +239,14 @@ ENTRIES = (
         0,
     ),
     Entry(
+        "explore/prior3-acrobot",
+        "explore --families acrobot --seeds 1 2 3 --steps 100000 --agents 'Farsighter (prior 3)' "
+        "--workers 2",
+        "the prior 3 on Acrobot-v1, where the prior 10 failed (the defaults: 3/3 in "
+        "random-features-classic; the prior 10: 0/3 in prior10-classic)",
+        0,
+    ),
+    Entry(
         "explore/doorkey",
         "explore --families doorkey --sizes 5 --seeds 1 2 3 --agents DDQN Farsighter "
         "'Farsighter (redraw revisit)'",
