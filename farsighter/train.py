@@ -55,6 +55,29 @@ def overlap_enabled(setting: str, envs: gym.vector.VectorEnv, device: torch.devi
     return setting == "on" or (setting == "auto" and can and device.type == "cuda")
 
 
+def random_features_note(width: int, obs_shape: tuple[int, ...], env: str) -> str | None:
+    """What a run with ``width`` random features (``blr.random_features``) on observations of
+    ``obs_shape`` should know, or None: images keep the learned features alone; a flat
+    observation wider than the random layer can hold more distinct states (one-hot cells)
+    than the layer has directions, and past that many visited states a new one no longer looks
+    new to the posterior (docs/design.md, "Why a fixed random layer runs out at depth")."""
+    if not width:
+        return None
+    if len(obs_shape) != 1:
+        return (
+            f"farsighter: blr.random_features applies to flat observations; {env}'s images "
+            f"{obs_shape} keep the learned features alone"
+        )
+    if obs_shape[0] > width:
+        return (
+            f"farsighter: note: {env}'s observation has {obs_shape[0]} entries, more than the "
+            f"{width} random features (blr.random_features); once a run has visited about "
+            f"{width} distinct states, new ones stop looking new to the posterior. A wider "
+            "layer keeps them apart, at O(width^2) a step"
+        )
+    return None
+
+
 def train(cfg: Config, callbacks: Sequence[Callback] = ()) -> dict[str, Any]:
     """Train ``cfg.algo`` on ``cfg.env``; returns the run's summary (also in summary.json).
 
@@ -69,12 +92,9 @@ def train(cfg: Config, callbacks: Sequence[Callback] = ()) -> dict[str, Any]:
     )  # a bad id fails before the run dir is touched
     obs_space, act_space = envs.single_observation_space, envs.single_action_space
     check_spaces(cfg.algo, obs_space, act_space)
-    if cfg.blr.random_features and len(obs_space.shape or ()) != 1:
-        print(
-            f"farsighter: blr.random_features applies to flat observations; {cfg.env}'s images "
-            f"{tuple(obs_space.shape or ())} keep the learned features alone",
-            file=sys.stderr,
-        )
+    note = random_features_note(cfg.blr.random_features, tuple(obs_space.shape or ()), cfg.env)
+    if note:
+        print(note, file=sys.stderr)
     overlap = overlap_enabled(cfg.runtime.overlap_env, envs, device)
     path = prepare_run_dir(cfg)
     prepare_process(cfg.runtime.torch_threads)

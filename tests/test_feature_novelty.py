@@ -22,3 +22,14 @@ def test_the_random_layer_runs_out_of_directions_once_cells_outnumber_it() -> No
     new = psi[143]
     assert novelty(new, few, 10)["novel_fraction"] > 0.2
     assert novelty(new, many, 10)["novel_fraction"] < 1e-9  # 100 rows span all 32 directions
+
+
+def test_a_run_is_told_when_its_observation_outgrows_the_random_layer() -> None:
+    from farsighter.train import random_features_note
+
+    assert random_features_note(0, (576,), "e") is None  # no random layer: nothing to say
+    assert random_features_note(512, (400,), "e") is None
+    wide = random_features_note(512, (576,), "farsighter/DeepSea24-v0")
+    assert wide is not None and "576 entries" in wide and "512 random features" in wide
+    image = random_features_note(512, (4, 84, 84), "ALE/Breakout-v5")
+    assert image is not None and "images" in image
