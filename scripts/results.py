@@ -247,6 +247,34 @@ ENTRIES = (
         0,
     ),
     Entry(
+        "explore/prior3-chain30",
+        "explore --families chain --sizes 30 --seeds 1 2 3 4 5 --agents "
+        "'Farsighter (prior 3)' --workers 2",
+        "the prior 3 on the chain L = 30 (the defaults: 5/5 in random-features-tasks)",
+        0,
+    ),
+    Entry(
+        "explore/prior3-mountaincar",
+        "explore --families mountaincar --seeds 1 2 3 --steps 100000 --agents "
+        "'Farsighter (prior 3)' --workers 2",
+        "the prior 3 on MountainCar-v0 (the defaults: 3/3 in random-features-classic)",
+        0,
+    ),
+    Entry(
+        "explore/prior3-deepsea",
+        "explore --families deepsea --sizes 10 14 20 --seeds 1 2 3 4 5 --agents "
+        "'Farsighter (prior 3)' --workers 2",
+        "the prior 3 on deep sea N = 10, 14 and 20 (the defaults: random-features)",
+        0,
+    ),
+    Entry(
+        "explore/prior3-frozenlake",
+        "explore --families frozenlake --sizes 4 --seeds 1 2 3 4 5 --agents "
+        "'Farsighter (prior 3)' --workers 2",
+        "the prior 3 on FrozenLake 4 x 4 (the defaults: 0/5 in random-features-tasks)",
+        0,
+    ),
+    Entry(
         "explore/doorkey",
         "explore --families doorkey --sizes 5 --seeds 1 2 3 --agents DDQN Farsighter "
         "'Farsighter (redraw revisit)'",
