@@ -17,6 +17,7 @@ visited cell.
 Pure arithmetic on the library's own random feature layer (no training; seconds):
 
     python -m benchmarks.feature_novelty [--sizes 10 14 20 24 30 40] [--widths 512 1024 2048]
+        [--kinds relu fourier]
 
 Writes ``benchmarks/results/<name>.json``.
 """
@@ -24,6 +25,7 @@ Writes ``benchmarks/results/<name>.json``.
 from __future__ import annotations
 
 import argparse
+import itertools
 from typing import Any
 
 import numpy as np
@@ -34,14 +36,15 @@ from benchmarks.common import write_result
 FRONTIERS = (0.5, 0.75, 0.9)
 
 
-def deep_sea_psi(n: int, width: int, seed: int) -> np.ndarray:
+def deep_sea_psi(n: int, width: int, seed: int, kind: str = "relu") -> np.ndarray:
     """psi of every cell of deep sea N = ``n`` (rows: cells in row-major order), from the
-    library's random feature layer as seed ``seed`` draws it."""
+    library's random feature layer of ``kind`` (``blr.random_features_kind``) as seed ``seed``
+    draws it."""
     from farsighter.networks import MLPTorso, RandomFeatureTorso
 
     torch.manual_seed(seed)
     obs = n * n
-    layer = RandomFeatureTorso(MLPTorso(obs, (8,)), obs, width)
+    layer = RandomFeatureTorso(MLPTorso(obs, (8,)), obs, width, kind)  # type: ignore[arg-type]
     with torch.no_grad():
         return layer.random_features(torch.eye(obs)).double().numpy()
 
@@ -62,8 +65,10 @@ def novelty(psi_new: np.ndarray, psi_seen: np.ndarray, visits: int) -> dict[str,
     }
 
 
-def frontier_novelty(n: int, width: int, seed: int, visits: int) -> dict[str, Any]:
-    psi = deep_sea_psi(n, width, seed)
+def frontier_novelty(
+    n: int, width: int, seed: int, visits: int, kind: str = "relu"
+) -> dict[str, Any]:
+    psi = deep_sea_psi(n, width, seed, kind)
     out: dict[str, Any] = {}
     for f in FRONTIERS:
         c = int(f * n)
@@ -80,30 +85,35 @@ def main() -> None:
     p.add_argument("--widths", type=int, nargs="+", default=[256, 512, 1024, 2048])
     p.add_argument("--seeds", type=int, nargs="+", default=[1, 2, 3])
     p.add_argument("--visits", type=int, default=10)
+    p.add_argument("--kinds", nargs="+", default=["relu"], choices=["relu", "fourier"])
     p.add_argument("--name", default="feature_novelty")
     a = p.parse_args()
     rows = []
-    for n in a.sizes:
-        for width in a.widths:
-            per_seed = [frontier_novelty(n, width, s, a.visits) for s in a.seeds]
-            row: dict[str, Any] = {"size": n, "width": width, "reachable_cells": n * (n + 1) // 2}
-            for f in FRONTIERS:
-                key = str(f)
-                row[key] = {
-                    "column": per_seed[0][key]["column"],
-                    "visited_cells": per_seed[0][key]["visited_cells"],
-                    **{
-                        m: round(float(np.mean([r[key][m] for r in per_seed])), 4)
-                        for m in ("novel_fraction", "sd_new_over_seen")
-                    },
-                }
-            rows.append(row)
-            cells = "  ".join(
-                f"c={row[str(f)]['column']:>2} ({row[str(f)]['visited_cells']:>3} seen): "
-                f"novel {row[str(f)]['novel_fraction']:.3f}, sd x{row[str(f)]['sd_new_over_seen']:.2f}"
-                for f in FRONTIERS
-            )
-            print(f"N={n:>2} width={width:>4}  {cells}", flush=True)
+    for n, width, kind in itertools.product(a.sizes, a.widths, a.kinds):
+        per_seed = [frontier_novelty(n, width, s, a.visits, kind) for s in a.seeds]
+        row: dict[str, Any] = {
+            "size": n,
+            "width": width,
+            "kind": kind,
+            "reachable_cells": n * (n + 1) // 2,
+        }
+        for f in FRONTIERS:
+            key = str(f)
+            row[key] = {
+                "column": per_seed[0][key]["column"],
+                "visited_cells": per_seed[0][key]["visited_cells"],
+                **{
+                    m: round(float(np.mean([r[key][m] for r in per_seed])), 4)
+                    for m in ("novel_fraction", "sd_new_over_seen")
+                },
+            }
+        rows.append(row)
+        cells = "  ".join(
+            f"c={row[str(f)]['column']:>2} ({row[str(f)]['visited_cells']:>3} seen): "
+            f"novel {row[str(f)]['novel_fraction']:.3f}, sd x{row[str(f)]['sd_new_over_seen']:.2f}"
+            for f in FRONTIERS
+        )
+        print(f"N={n:>2} width={width:>4} {kind:>7}  {cells}", flush=True)
     path = write_result(
         a.name, {"seeds": a.seeds, "visits": a.visits, "frontiers": FRONTIERS, "rows": rows}
     )

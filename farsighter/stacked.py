@@ -17,7 +17,6 @@ would write.
 
 from __future__ import annotations
 
-import math
 from collections.abc import Sequence
 from typing import Any
 
@@ -25,7 +24,13 @@ import torch
 import torch.nn.functional as F
 from torch import nn
 
-from farsighter.networks import MLPTorso, QNetwork, RandomFeatureTorso
+from farsighter.networks import (
+    MLPTorso,
+    QNetwork,
+    RandomFeatureKind,
+    RandomFeatureTorso,
+    random_feature_map,
+)
 
 ALIGN = 16
 """Floats (64 bytes) that every seed's slice starts at a multiple of. A tensor alone starts at an
@@ -170,6 +175,9 @@ class StackedQNetwork(nn.Module):
         # a torso: features, no linear head
         self.relu_last = isinstance(first, MLPTorso | RandomFeatureTorso)
         self.rf_width = first.width if isinstance(first, RandomFeatureTorso) else 0
+        self.rf_kind: RandomFeatureKind = (
+            first.kind if isinstance(first, RandomFeatureTorso) else "relu"
+        )
         self.buffer_names: list[str] = []
         if self.rf_width:  # each seed's random layer, drawn under its own seed (never trained)
             for name in ("rf_weight", "rf_bias"):
@@ -211,11 +219,11 @@ class StackedQNetwork(nn.Module):
         return self.random_features(obs_SB.float().flatten(2)) if self.rf_width else None
 
     def random_features(self, x_SBO: torch.Tensor) -> torch.Tensor:
-        """Each seed's psi(s) = relu(W s + b) / sqrt(width) on its own rows, (S, B, width)
+        """Each seed's psi(s) on its own rows, (S, B, width)
         (:meth:`RandomFeatureTorso.random_features`, in place: nothing in it is trained)."""
         with torch.no_grad():
             psi = stacked_linear(x_SBO, self.rf_weight, self.rf_bias)
-        return psi.relu_().div_(math.sqrt(self.rf_width))
+        return random_feature_map(psi, self.rf_kind, self.rf_width)
 
     def member_forward(self, obs_B: torch.Tensor, s: int) -> torch.Tensor:
         """Seed ``s``'s network alone on ``obs_B`` (B rows): the operations of its QNetwork or
@@ -229,8 +237,8 @@ class StackedQNetwork(nn.Module):
             if i // 2 < last or self.relu_last:
                 x = torch.relu(x)
         if self.rf_width:
-            psi = F.linear(inputs, self.rf_weight[s], self.rf_bias[s]).relu_()
-            return torch.cat([x, psi.div_(math.sqrt(self.rf_width))], dim=1)
+            psi = F.linear(inputs, self.rf_weight[s], self.rf_bias[s])
+            return torch.cat([x, random_feature_map(psi, self.rf_kind, self.rf_width)], dim=1)
         return x
 
     def member_state(self, s: int) -> dict[str, torch.Tensor]:

@@ -275,6 +275,15 @@ ENTRIES = (
         0,
     ),
     Entry(
+        "explore/fourier-deepsea",
+        "explore --families deepsea --sizes 24 30 --seeds 1 2 --agents "
+        "'Farsighter (Fourier features)' --workers 2",
+        "random Fourier features (blr.random_features_kind fourier) in place of the ReLU ones on "
+        "deep sea N = 24 and 30, 2 seeds (the defaults: 0/5 at N = 24 in deepsea-17-24, 0/5 at "
+        "N = 30 in random-features)",
+        0,
+    ),
+    Entry(
         "explore/doorkey",
         "explore --families doorkey --sizes 5 --seeds 1 2 3 --agents DDQN Farsighter "
         "'Farsighter (redraw revisit)'",

@@ -55,6 +55,12 @@ def _files(run: Path) -> dict[str, list[str]]:
         # the defaults: k = 10 with k_target max, the targets' posterior noise, a draw held for
         # k, each seed's own fixed random features beside its learned ones
         ("farsighter", "CartPole-v1", {"preset": "general"}),
+        # random Fourier features in place of the ReLU ones (each seed's cos layer, stacked)
+        (
+            "farsighter",
+            "farsighter/DeepSea6-v0",
+            {"preset": "general", "blr__random_features_kind": "fourier", "batch_size": 24},
+        ),
         # held draws redrawn on a revisit, two envs a seed, clipping that bites, k = 3, over the
         # learned features alone
         (

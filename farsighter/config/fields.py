@@ -64,6 +64,13 @@ class BLRConfig:
     posterior's uncertainty narrows where the run has been and stays wide elsewhere. Flat
     observations only: image torsos keep the learned features alone (a run says so on stderr).
     0: the learned features alone (the paper). Our extension, not the paper's."""
+    random_features_kind: Literal["relu", "fourier"] = "relu"
+    """The random features' map: relu, psi(s) = relu(W s + b) / sqrt(width) with W, b standard
+    normal; fourier, psi(s) = sqrt(2 / width) cos(W s + b) with W ~ N(0, 1 / 0.25) and b uniform
+    on [0, 2 pi) (random Fourier features of a Gaussian kernel of lengthscale 0.5), whose
+    features of two distinct one-hot states share almost nothing, so a layer of a given width
+    keeps new states looking new for longer (docs/design.md, "Why a fixed random layer runs
+    out at depth")."""
     posterior_sampling: Literal["recent", "uniform"] = "recent"
     """Batch-mode refresh tuples: the latest D transitions (Table 1's 'most recent'), or D starts
     drawn uniformly from the whole buffer with replacement (the BDQN authors' code)."""

@@ -344,6 +344,9 @@ AGENTS: tuple[Agent, ...] = (
     Agent("Farsighter (prior 10)", "farsighter", {"blr.prior_std": 10.0}),
     Agent("OB2I", "ob2i"),
     Agent("RND", "rnd"),
+    # random Fourier features in place of the random ReLU features: the same width, but two
+    # distinct one-hot states' features share almost nothing (benchmarks/feature_novelty.py)
+    Agent("Farsighter (Fourier features)", "farsighter", {"blr.random_features_kind": "fourier"}),
 )
 COLORS = {a.label: f"C{i}" for i, a in enumerate(AGENTS)}
 _NAMED_ONLY = (
@@ -355,6 +358,7 @@ _NAMED_ONLY = (
     "Farsighter (centred draw)",
     "Farsighter (prior 3)",
     "Farsighter (prior 10)",
+    "Farsighter (Fourier features)",
 )
 DEFAULT_AGENTS = tuple(a.label for a in AGENTS if a.label not in _NAMED_ONLY)
 """The default list: every agent once but those run only when named. "Farsighter (redraw k)" and
