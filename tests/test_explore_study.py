@@ -198,6 +198,7 @@ def test_agents_are_one_config_each_on_the_auto_preset(tmp_path: Path) -> None:
         "Farsighter (prior 10)",
         "OB2I",
         "RND",
+        "Farsighter (Fourier features)",
     ]
     by = {a.label: a for a in AGENTS}
     # the default list trains no config twice, and leaves out the variants run only when named
@@ -210,10 +211,11 @@ def test_agents_are_one_config_each_on_the_auto_preset(tmp_path: Path) -> None:
         "Farsighter (centred draw)",
         "Farsighter (prior 3)",
         "Farsighter (prior 10)",
+        "Farsighter (Fourier features)",
     }
     assert not named_only & set(StudyConfig().agents)
     assert "Farsighter (redraw step)" in StudyConfig().agents
-    assert len(StudyConfig().agents) == len(AGENTS) - 8
+    assert len(StudyConfig().agents) == len(AGENTS) - 9
     every = [
         run_config(a, QUICK, 3, tmp_path, (chain_id(10), 10_000))
         for a in AGENTS
@@ -236,6 +238,8 @@ def test_agents_are_one_config_each_on_the_auto_preset(tmp_path: Path) -> None:
     assert by["Farsighter"].overrides == {} and by["DDQN"].overrides == {}
     assert by["Farsighter (redraw k)"].overrides == {"blr.redraw": "k"}
     assert by["Farsighter (centred draw)"].overrides == {"blr.center_sample": True}
+    fourier = run_config(by["Farsighter (Fourier features)"], QUICK, 3, tmp_path, (chain_id(10), 1))
+    assert (fourier.blr.random_features_kind, fourier.blr.random_features) == ("fourier", 512)
     cfg = run_config(by["Farsighter (redraw step)"], QUICK, 3, tmp_path, (chain_id(10), 10_000))
     assert cfg == make_config(
         "farsighter",
