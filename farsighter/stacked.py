@@ -129,8 +129,15 @@ def stacked_linear(x_SBI: torch.Tensor, w_SOI: torch.Tensor, b_SO: torch.Tensor)
 
 
 def _affine(x_SBI: torch.Tensor, w_SOI: torch.Tensor, b_SO: torch.Tensor) -> torch.Tensor:
-    """``x W^T + b`` per seed into an aligned result (the bias first, then the product added)."""
-    out = aligned_empty((x_SBI.shape[0], x_SBI.shape[1], w_SOI.shape[1]), x_SBI)
+    """``x W^T + b`` per seed (the bias first, then the product added), into an aligned result
+    when its plain layout is aligned. Otherwise the result is plain (contiguous): on CPU a batched
+    product into a padded layout takes a kernel several times slower for a few rows (an acting
+    step's: 36 against 8 microseconds for 16 seeds of one row by 120), with the same rounding;
+    a next layer aligns its input itself (:func:`stacked_linear`)."""
+    S, rows, cols = x_SBI.shape[0], x_SBI.shape[1], w_SOI.shape[1]
+    if (rows * cols) % ALIGN and x_SBI.device.type == "cpu":
+        return torch.baddbmm(b_SO.unsqueeze(1), x_SBI, w_SOI.transpose(1, 2))
+    out = aligned_empty((S, rows, cols), x_SBI)
     out.copy_(b_SO.unsqueeze(1).expand_as(out))
     return out.baddbmm_(x_SBI, w_SOI.transpose(1, 2))
 
