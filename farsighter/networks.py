@@ -21,6 +21,7 @@ from torch.nn import functional as F
 
 from farsighter.ops.bayes_layer import BayesianLinear
 from farsighter.ops.naf import NAFHead, naf_q, scale_action
+from farsighter.ops.onehot import gathered_linear, one_hot_rows, worth_gathering
 
 Precision = Literal["fp32", "bf16"]
 
@@ -96,9 +97,20 @@ class MLPTorso(Torso):
         # ``self.net``'s layers called as functions: the same operations, without a module call
         # or attribute lookup per layer (a tenth of a millisecond per forward of a small net on
         # a slow CPU, paid at every environment step).
-        for weight, bias in self._params:
-            x = torch.relu(F.linear(x, weight, bias))
+        for i, (weight, bias) in enumerate(self._params):
+            x = torch.relu(_linear(x, weight, bias) if i == 0 else F.linear(x, weight, bias))
         return x
+
+
+def _linear(x: torch.Tensor, weight: torch.Tensor, bias: torch.Tensor) -> torch.Tensor:
+    """``F.linear`` of a network's input layer; where no gradient flows through it and the rows
+    are one-hot (tabular tasks), the same values by a gather (:mod:`farsighter.ops.onehot`)."""
+    grad = torch.is_grad_enabled() and (weight.requires_grad or x.requires_grad)
+    if not grad and worth_gathering(x, weight):
+        hot = one_hot_rows(x)
+        if hot is not None:
+            return gathered_linear(hot, weight, bias)
+    return F.linear(x, weight, bias)
 
 
 RandomFeatureKind = Literal["relu", "fourier"]
@@ -163,7 +175,7 @@ class RandomFeatureTorso(Torso):
 
     def random_features(self, x: torch.Tensor) -> torch.Tensor:
         """psi(s) of prepared observations, (B, width). In place: nothing in it is trained."""
-        return random_feature_map(F.linear(x, self.rf_weight, self.rf_bias), self.kind, self.width)
+        return random_feature_map(_linear(x, self.rf_weight, self.rf_bias), self.kind, self.width)
 
     def body(self, x: torch.Tensor, psi: torch.Tensor | None = None) -> torch.Tensor:
         """[learned features, psi(s)]; ``psi`` when already computed (by a torso of the same

@@ -31,6 +31,7 @@ from farsighter.networks import (
     RandomFeatureTorso,
     random_feature_map,
 )
+from farsighter.ops.onehot import one_hot_rows, stacked_gathered_linear, worth_gathering
 
 ALIGN = 16
 """Floats (64 bytes) that every seed's slice starts at a multiple of. A tensor alone starts at an
@@ -92,10 +93,16 @@ class StackedLinear(torch.autograd.Function):
     # binds its arguments through inspect.signature (tens of microseconds per layer).
     @staticmethod
     def forward(
-        ctx: Any, x_SBI: torch.Tensor, w_SOI: torch.Tensor, b_SO: torch.Tensor
+        ctx: Any,
+        x_SBI: torch.Tensor,
+        w_SOI: torch.Tensor,
+        b_SO: torch.Tensor,
+        hot: tuple[torch.Tensor, torch.Tensor] | None = None,
     ) -> torch.Tensor:  # type: ignore[override]
         x_SBI, w_SOI = aligned(x_SBI), aligned(w_SOI)
         ctx.save_for_backward(x_SBI, w_SOI)
+        if hot is not None:  # one-hot rows: the product's values by a gather (ops.onehot)
+            return stacked_gathered_linear(hot, w_SOI, b_SO)
         return _affine(x_SBI, w_SOI, b_SO)
 
     @staticmethod
@@ -105,7 +112,7 @@ class StackedLinear(torch.autograd.Function):
         dx = _product(dy_SBO, w_SOI) if ctx.needs_input_grad[0] else None
         dw = _product(dy_SBO.transpose(1, 2), x_SBI) if ctx.needs_input_grad[1] else None
         db = dy_SBO.sum(1) if ctx.needs_input_grad[2] else None
-        return dx, dw, db
+        return dx, dw, db, None
 
 
 SMALL_PRODUCT = 400
@@ -114,11 +121,21 @@ than this (rows x inner x columns; ``baddbmm`` in ATen's LinearAlgebra.cpp), who
 differs from the gemm that ``F.linear`` and larger batched products use."""
 
 
-def stacked_linear(x_SBI: torch.Tensor, w_SOI: torch.Tensor, b_SO: torch.Tensor) -> torch.Tensor:
+def stacked_linear(
+    x_SBI: torch.Tensor,
+    w_SOI: torch.Tensor,
+    b_SO: torch.Tensor,
+    hot: tuple[torch.Tensor, torch.Tensor] | None = None,
+) -> torch.Tensor:
     """:class:`StackedLinear`; without autograd (acting, targets) its forward alone. A product
     below :data:`SMALL_PRODUCT` per seed (a small head acting on one observation) is ``F.linear``
-    seed by seed, with autograd's own backward."""
+    seed by seed, with autograd's own backward. ``hot``: :func:`farsighter.ops.onehot.one_hot_rows`
+    of ``x_SBI`` when its rows are one-hot (the forward is then a gather, same values)."""
     rows, inner = x_SBI.shape[1], x_SBI.shape[2]
+    if hot is not None:
+        if torch.is_grad_enabled() and (w_SOI.requires_grad or x_SBI.requires_grad):
+            return StackedLinear.apply(x_SBI, w_SOI, b_SO, hot)  # type: ignore[no-any-return]
+        return stacked_gathered_linear(hot, w_SOI, b_SO)
     if rows * inner * w_SOI.shape[1] < SMALL_PRODUCT:
         x_SBI, w_SOI = aligned(x_SBI), aligned(w_SOI)  # each slice where a tensor alone starts
         slices = zip(x_SBI.unbind(0), w_SOI.unbind(0), b_SO.unbind(0), strict=True)
@@ -208,28 +225,46 @@ class StackedQNetwork(nn.Module):
         when already computed (:meth:`psi`; an online torso and its target share them)."""
         x = inputs = obs_SB.float().flatten(2)
         layers = list(zip(self._params[0::2], self._params[1::2], strict=True))
+        hot = self._one_hot(inputs, psi_SBW)
         relu = torch.relu if torch.is_grad_enabled() else torch.relu_  # in place: stays aligned
-        for weight, bias in layers[:-1]:  # the torso: ReLU after each layer
-            x = relu(stacked_linear(x, weight, bias))
+        for i, (weight, bias) in enumerate(layers[:-1]):  # the torso: ReLU after each layer
+            x = relu(stacked_linear(x, weight, bias, hot if i == 0 else None))
         weight, bias = layers[-1]  # the linear head, or the torso's last layer
-        x = stacked_linear(x, weight, bias)
+        x = stacked_linear(x, weight, bias, hot if len(layers) == 1 else None)
         if self.rf_width:  # RandomFeatureTorso.body: [learned features, psi(s)]
-            psi = self.random_features(inputs) if psi_SBW is None else psi_SBW
+            psi = self.random_features(inputs, hot) if psi_SBW is None else psi_SBW
             return aligned(torch.cat([relu(x), psi], dim=2))
         # features: each seed's slice aligned as a tensor alone (the seeds' own products with
         # them round as the agent alone's do)
         return aligned(relu(x)) if self.relu_last else x
 
+    def _one_hot(
+        self, inputs: torch.Tensor, psi_SBW: torch.Tensor | None
+    ) -> tuple[torch.Tensor, torch.Tensor] | None:
+        """:func:`one_hot_rows` of the inputs when a layer they enter is worth the check."""
+        first = self._params[0]
+        wide = self.rf_weight if self.rf_width and psi_SBW is None else first
+        if not worth_gathering(inputs, wide if wide.shape[1] > first.shape[1] else first):
+            return None
+        return one_hot_rows(inputs)
+
     def psi(self, obs_SB: torch.Tensor) -> torch.Tensor | None:
         """The random features of observations (None without a random layer), for
         :meth:`forward` of this network and of its target."""
-        return self.random_features(obs_SB.float().flatten(2)) if self.rf_width else None
+        if not self.rf_width:
+            return None
+        x = obs_SB.float().flatten(2)
+        hot = one_hot_rows(x) if worth_gathering(x, self.rf_weight) else None
+        return self.random_features(x, hot)
 
-    def random_features(self, x_SBO: torch.Tensor) -> torch.Tensor:
+    def random_features(
+        self, x_SBO: torch.Tensor, hot: tuple[torch.Tensor, torch.Tensor] | None = None
+    ) -> torch.Tensor:
         """Each seed's psi(s) on its own rows, (S, B, width)
-        (:meth:`RandomFeatureTorso.random_features`, in place: nothing in it is trained)."""
+        (:meth:`RandomFeatureTorso.random_features`, in place: nothing in it is trained).
+        ``hot``: the rows' :func:`one_hot_rows`, when known."""
         with torch.no_grad():
-            psi = stacked_linear(x_SBO, self.rf_weight, self.rf_bias)
+            psi = stacked_linear(x_SBO, self.rf_weight, self.rf_bias, hot)
         return random_feature_map(psi, self.rf_kind, self.rf_width)
 
     def member_forward(self, obs_B: torch.Tensor, s: int) -> torch.Tensor:
