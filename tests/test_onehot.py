@@ -126,3 +126,28 @@ def test_networks_give_the_same_values_with_and_without_the_gather(monkeypatch: 
     assert not calls
     for a, b in zip(with_gather, without, strict=True):
         assert torch.equal(a, b)
+
+
+@pytest.mark.parametrize(
+    "row",
+    [
+        [1.0, 1e-30, 0.0],  # the float sum rounds to 1
+        [1.0 - 2.0**-24, 2.0**-24, 0.0],  # sums to 1 exactly
+        [0.5, 1.1754944e-38, 0.0],  # bits sum to those of 1.0
+        [-0.0, 1.0, 0.0],  # a sign bit
+        [float("inf"), 0.0, 0.0],
+        [1e-45, 0.0, 0.0],  # a denormal
+    ],
+)
+def test_rows_that_fool_a_sum_are_refused(row: list[float]) -> None:
+    assert one_hot_rows(torch.tensor([[0.0, 0.0, 1.0], row])) is None
+
+
+def test_one_hot_rows_gives_each_rows_column() -> None:
+    g = torch.Generator().manual_seed(3)
+    x = one_hot(64, 900, g, zero_rows=3)
+    hot = one_hot_rows(x)
+    assert hot is not None
+    index, value = hot
+    assert torch.equal(value, x.sum(1))
+    assert torch.equal(index[3:], x[3:].argmax(1))
