@@ -9,8 +9,9 @@ and deep sea N = 20 with the library's defaults). Each entry is one child proces
   torch threads (2 uses both cores of this machine for the batched products).
 
 Steps/s is every seed's environment steps over the wall time of the training call (the final
-evaluation and checkpoint excluded: :class:`farsighter.session.RunLog`'s ``loop_end``), the same
-count for the run alone and the batch. Rounds interleave the entries, so that the machine's drift
+evaluation and checkpoint excluded: :class:`farsighter.session.RunLog`'s ``loop_end``; the
+one-time import of ``torch._dynamo`` made before the clock starts), the same count for the run
+alone and the batch. Rounds interleave the entries, so that the machine's drift
 falls on all of them alike.
 
     python -m benchmarks.seeds_sps [--algo ddqn|farsighter|rnd] [--tasks cartpole deepsea]
@@ -86,6 +87,11 @@ def run_one(
     from farsighter.train import train
 
     torch.set_num_threads(threads)
+    # torch's optimizers import torch._dynamo when the first one is built: 1.75 s once a process
+    # (measured), which the clock would charge to the run alone, a third of a CartPole run's
+    # 6 s, and inflate the ratios (the figures before session 27 include it)
+    import torch._dynamo  # noqa: F401
+
     ends: list[float] = []
     end_of_training = RunLog.end_of_training
 
