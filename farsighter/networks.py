@@ -21,7 +21,7 @@ from torch.nn import functional as F
 
 from farsighter.ops.bayes_layer import BayesianLinear
 from farsighter.ops.naf import NAFHead, naf_q, scale_action
-from farsighter.ops.onehot import gathered_linear, one_hot_rows, worth_gathering
+from farsighter.ops.onehot import gathered_linear, hot_rows
 
 Precision = Literal["fp32", "bf16"]
 
@@ -106,11 +106,8 @@ def _linear(x: torch.Tensor, weight: torch.Tensor, bias: torch.Tensor) -> torch.
     """``F.linear`` of a network's input layer; where no gradient flows through it and the rows
     are one-hot (tabular tasks), the same values by a gather (:mod:`farsighter.ops.onehot`)."""
     grad = torch.is_grad_enabled() and (weight.requires_grad or x.requires_grad)
-    if not grad and worth_gathering(x, weight):
-        hot = one_hot_rows(x)
-        if hot is not None:
-            return gathered_linear(hot, weight, bias)
-    return F.linear(x, weight, bias)
+    hot = None if grad else hot_rows(x, weight)
+    return F.linear(x, weight, bias) if hot is None else gathered_linear(hot, weight, bias)
 
 
 RandomFeatureKind = Literal["relu", "fourier"]

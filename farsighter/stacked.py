@@ -31,7 +31,7 @@ from farsighter.networks import (
     RandomFeatureTorso,
     random_feature_map,
 )
-from farsighter.ops.onehot import one_hot_rows, stacked_gathered_linear, worth_gathering
+from farsighter.ops.onehot import hot_rows, stacked_gathered_linear
 
 ALIGN = 16
 """Floats (64 bytes) that every seed's slice starts at a multiple of. A tensor alone starts at an
@@ -225,7 +225,9 @@ class StackedQNetwork(nn.Module):
         when already computed (:meth:`psi`; an online torso and its target share them)."""
         x = inputs = obs_SB.float().flatten(2)
         layers = list(zip(self._params[0::2], self._params[1::2], strict=True))
-        hot = self._one_hot(inputs, psi_SBW)
+        # one check of the inputs for the first layer and the random layer (ops.onehot)
+        wide = (self.rf_weight,) if self.rf_width and psi_SBW is None else ()
+        hot = hot_rows(inputs, self._params[0], *wide)
         relu = torch.relu if torch.is_grad_enabled() else torch.relu_  # in place: stays aligned
         for i, (weight, bias) in enumerate(layers[:-1]):  # the torso: ReLU after each layer
             x = relu(stacked_linear(x, weight, bias, hot if i == 0 else None))
@@ -238,24 +240,13 @@ class StackedQNetwork(nn.Module):
         # them round as the agent alone's do)
         return aligned(relu(x)) if self.relu_last else x
 
-    def _one_hot(
-        self, inputs: torch.Tensor, psi_SBW: torch.Tensor | None
-    ) -> tuple[torch.Tensor, torch.Tensor] | None:
-        """:func:`one_hot_rows` of the inputs when a layer they enter is worth the check."""
-        first = self._params[0]
-        wide = self.rf_weight if self.rf_width and psi_SBW is None else first
-        if not worth_gathering(inputs, wide if wide.shape[1] > first.shape[1] else first):
-            return None
-        return one_hot_rows(inputs)
-
     def psi(self, obs_SB: torch.Tensor) -> torch.Tensor | None:
         """The random features of observations (None without a random layer), for
         :meth:`forward` of this network and of its target."""
         if not self.rf_width:
             return None
         x = obs_SB.float().flatten(2)
-        hot = one_hot_rows(x) if worth_gathering(x, self.rf_weight) else None
-        return self.random_features(x, hot)
+        return self.random_features(x, hot_rows(x, self.rf_weight))
 
     def random_features(
         self, x_SBO: torch.Tensor, hot: tuple[torch.Tensor, torch.Tensor] | None = None

@@ -116,8 +116,7 @@ def test_networks_give_the_same_values_with_and_without_the_gather(monkeypatch: 
         calls.append(result is not None)
         return result
 
-    monkeypatch.setattr("farsighter.networks.one_hot_rows", counted)
-    monkeypatch.setattr("farsighter.stacked.one_hot_rows", counted)
+    monkeypatch.setattr(onehot, "one_hot_rows", counted)  # what hot_rows calls
     with_gather = values()
     assert sum(calls) >= 5, calls  # target nets, psi, stacks: each took the gather
     _without_gather(monkeypatch)

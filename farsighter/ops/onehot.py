@@ -35,6 +35,14 @@ def worth_gathering(x: torch.Tensor, weight: torch.Tensor) -> bool:
     )
 
 
+def hot_rows(x: torch.Tensor, *weights: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor] | None:
+    """:func:`one_hot_rows` of ``x`` when gathering pays for a layer of any of ``weights``
+    (:func:`worth_gathering`); None without the check otherwise."""
+    if any(worth_gathering(x, w) for w in weights):
+        return one_hot_rows(x)
+    return None
+
+
 ONE_BITS = 0x3F800000
 """The bits of float32 1.0 read as an int32."""
 
@@ -74,8 +82,7 @@ def gathered_linear(
     """``F.linear(x, weight, bias)`` for the rows ``hot`` = :func:`one_hot_rows` (x), (B, out)."""
     index_B, value_B = hot
     columns_BO = weight.t().index_select(0, index_B)  # contiguous, as F.linear's result
-    if bool((value_B == 1).all()):
-        return bias + columns_BO
+    # b + v W[:, j]: v is 1 (exactly b + W[:, j]) or 0 (a zero row: b)
     return torch.addcmul(bias, value_B.unsqueeze(1), columns_BO)
 
 
@@ -91,8 +98,6 @@ def stacked_gathered_linear(
     # contiguous, as the product's result
     columns_SOB = torch.gather(weight_SOI, 2, index_SB.unsqueeze(1).expand(S, out, B))
     result = torch.empty(S, B, out, dtype=weight_SOI.dtype, device=weight_SOI.device)
-    if bool((value_SB == 1).all()):
-        return torch.add(bias_SO.unsqueeze(1), columns_SOB.transpose(1, 2), out=result)
     return torch.addcmul(
         bias_SO.unsqueeze(1), value_SB.unsqueeze(2), columns_SOB.transpose(1, 2), out=result
     )
