@@ -199,6 +199,7 @@ def test_agents_are_one_config_each_on_the_auto_preset(tmp_path: Path) -> None:
         "OB2I",
         "RND",
         "Farsighter (Fourier features)",
+        "Farsighter (data weight 100)",
     ]
     by = {a.label: a for a in AGENTS}
     # the default list trains no config twice, and leaves out the variants run only when named
@@ -212,10 +213,11 @@ def test_agents_are_one_config_each_on_the_auto_preset(tmp_path: Path) -> None:
         "Farsighter (prior 3)",
         "Farsighter (prior 10)",
         "Farsighter (Fourier features)",
+        "Farsighter (data weight 100)",
     }
     assert not named_only & set(StudyConfig().agents)
     assert "Farsighter (redraw step)" in StudyConfig().agents
-    assert len(StudyConfig().agents) == len(AGENTS) - 9
+    assert len(StudyConfig().agents) == len(AGENTS) - 10
     every = [
         run_config(a, QUICK, 3, tmp_path, (chain_id(10), 10_000))
         for a in AGENTS

@@ -139,6 +139,24 @@ def test_incremental_mode_accumulates_update_minibatches(tmp_path: Path) -> None
     assert torch.equal(agent.head.phiy_AD, y_stats)  # a refresh alone adds nothing
 
 
+def test_data_weight_scales_the_rows_weight_in_the_statistics(tmp_path: Path) -> None:
+    """blr.data_weight c multiplies each row's weight train_every / batch_size: the statistics
+    are c times those of the default, so a novel direction's mean moves c times as far from the
+    prior per sample."""
+    phi_BD, a_B, y_B = torch.randn(16, 32), torch.zeros(16, dtype=torch.int64), torch.randn(16)
+    heads = []
+    for c in (1.0, 8.0):
+        agent = make_agent(
+            tmp_path, blr__mode="incremental", blr__data_weight=c, train_every=2, batch_size=16
+        )
+        accumulate(agent.cfg, agent.head, agent.recent_phi, phi_BD, a_B, y_B)
+        heads.append(agent.head)
+    one, eight = heads
+    assert torch.allclose(eight.phiphiT_ADD, 8 * one.phiphiT_ADD, atol=1e-4)
+    assert torch.allclose(eight.phiy_AD, 8 * one.phiy_AD, atol=1e-4)
+    assert torch.allclose(eight.count_A, one.count_A)  # rows counted, not weighted
+
+
 def test_q_variance_without_adaptive_k_is_the_refreshs_own_when_read(tmp_path: Path) -> None:
     """With adaptive k off the Q-variance is computed when read (diagnostics, checkpoints):
     it is the value at the refresh, from the rows the refresh held, however many minibatches

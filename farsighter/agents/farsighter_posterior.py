@@ -110,9 +110,10 @@ def accumulate(
     y_B: torch.Tensor,
 ) -> None:
     """Incremental mode: add a minibatch to the running statistics with weight
-    w = train_every / batch_size (scaling phi and y by sqrt(w) scales Phi Phi^T and Phi y by w),
+    w = data_weight train_every / batch_size (scaling phi and y by sqrt(w) scales Phi Phi^T and
+    Phi y by w),
     and keep its features for adaptive k's Q-variance."""
-    root_w = (cfg.train_every / cfg.batch_size) ** 0.5
+    root_w = (cfg.blr.data_weight * cfg.train_every / cfg.batch_size) ** 0.5
     head.accumulate(phi_BD * root_w, a_B, y_B * root_w)
     recent_phi.add(phi_BD)
 

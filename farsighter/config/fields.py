@@ -28,6 +28,13 @@ class BLRConfig:
     """batch: recompute Phi Phi^T from D tuples each refresh; incremental: running statistics."""
     forgetting: float = 1.0
     """Incremental mode: statistics are multiplied by this before each accumulation (1 = none)."""
+    data_weight: float = 1.0
+    """Incremental mode: multiplies the weight each minibatch row gets in the statistics,
+    train_every / batch_size, with which a transition counts about once over its time in the
+    replay (1). Above 1 the mean follows the data faster against the prior (a rarely seen
+    reward is learned from fewer samples) and the posterior narrows faster where the run has
+    been, while its width where the run has not been (the prior's) stays as it is. Our
+    extension."""
     scale: Literal["fixed", "residual"] = "fixed"
     """fixed: sigma and sigma_eps are the constants above (the paper). residual: at every refresh
     sigma_eps = max(noise_std, RMS residual of the regression targets under the posterior mean)
@@ -86,6 +93,7 @@ class BLRConfig:
             (self.noise_std > 0, f"blr.noise_std must be > 0 (got {self.noise_std})"),
             (self.cov_scale > 0, f"blr.cov_scale must be > 0 (got {self.cov_scale})"),
             (0 < self.forgetting <= 1, "blr.forgetting must be in (0, 1]"),
+            (self.data_weight > 0, f"blr.data_weight must be > 0 (got {self.data_weight})"),
             (self.posterior_every >= 1, "blr.posterior_every must be >= 1"),
             (self.posterior_samples >= 1, "blr.posterior_samples must be >= 1"),
             (self.redraw_every >= 1, "blr.redraw_every must be >= 1"),

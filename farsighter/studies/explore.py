@@ -347,6 +347,11 @@ AGENTS: tuple[Agent, ...] = (
     # random Fourier features in place of the random ReLU features: the same width, but two
     # distinct one-hot states' features share almost nothing (benchmarks/feature_novelty.py)
     Agent("Farsighter (Fourier features)", "farsighter", {"blr.random_features_kind": "fourier"}),
+    # each minibatch row weighs 100 times train_every / batch_size in the posterior's statistics:
+    # its mean follows a rarely seen reward from a few samples where the default's needs the
+    # row's whole time in the replay, while its width where the run has not been stays the
+    # prior's (benchmarks/deepsea_frontier.py --set blr.data_weight=100)
+    Agent("Farsighter (data weight 100)", "farsighter", {"blr.data_weight": 100.0}),
 )
 COLORS = {a.label: f"C{i}" for i, a in enumerate(AGENTS)}
 _NAMED_ONLY = (
@@ -359,6 +364,7 @@ _NAMED_ONLY = (
     "Farsighter (prior 3)",
     "Farsighter (prior 10)",
     "Farsighter (Fourier features)",
+    "Farsighter (data weight 100)",
 )
 DEFAULT_AGENTS = tuple(a.label for a in AGENTS if a.label not in _NAMED_ONLY)
 """The default list: every agent once but those run only when named. "Farsighter (redraw k)" and
