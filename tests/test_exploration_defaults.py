@@ -436,11 +436,14 @@ def test_auto_gives_discrete_tasks_the_general_preset_and_keeps_table_1_selectab
         "residual",
     )
     assert (cfg.blr.target, cfg.blr.redraw, cfg.k_target, cfg.k) == ("sample", "k", "max", 10)
+    assert (cfg.blr.random_features, cfg.blr.data_weight) == (512, 100.0)
+    assert make_config("bdqn", "farsighter/Chain10-v0").blr.data_weight == 1.0  # Farsighter's
     cartpole = make_config("farsighter", "CartPole-v1", preset="cartpole")  # as measured
     assert (cartpole.blr.redraw, cartpole.k_target) == ("episode", "max")
     bdqn = make_config("bdqn", "CartPole-v1")
     assert (bdqn.blr.redraw, bdqn.k_target, bdqn.k) == ("episode", "k", 1)
     control = make_config("farsighter", "CartPole-v1", preset="control")
+    assert control.blr.data_weight == 1.0  # the paper's posterior: every sample once
     assert (control.blr.mode, control.blr.posterior_every, control.blr.scale) == (
         "batch",
         10_000,

@@ -200,6 +200,7 @@ def test_agents_are_one_config_each_on_the_auto_preset(tmp_path: Path) -> None:
         "RND",
         "Farsighter (Fourier features)",
         "Farsighter (data weight 100)",
+        "Farsighter (data weight 1)",
     ]
     by = {a.label: a for a in AGENTS}
     # the default list trains no config twice, and leaves out the variants run only when named
@@ -214,14 +215,20 @@ def test_agents_are_one_config_each_on_the_auto_preset(tmp_path: Path) -> None:
         "Farsighter (prior 10)",
         "Farsighter (Fourier features)",
         "Farsighter (data weight 100)",
+        "Farsighter (data weight 1)",
     }
     assert not named_only & set(StudyConfig().agents)
     assert "Farsighter (redraw step)" in StudyConfig().agents
-    assert len(StudyConfig().agents) == len(AGENTS) - 10
+    assert len(StudyConfig().agents) == len(AGENTS) - 11
     every = [
         run_config(a, QUICK, 3, tmp_path, (chain_id(10), 10_000))
         for a in AGENTS
-        if a.label not in ("Farsighter (redraw k)", "Farsighter (random features)")
+        if a.label
+        not in (
+            "Farsighter (redraw k)",
+            "Farsighter (random features)",
+            "Farsighter (data weight 100)",
+        )
     ]
     assert len({repr(dataclasses.replace(c, run_dir="")) for c in every}) == len(every)
     mean_k = run_config(
@@ -232,6 +239,11 @@ def test_agents_are_one_config_each_on_the_auto_preset(tmp_path: Path) -> None:
     assert (
         every[3].blr.random_features == 512
     )  # the default's: the posterior over random features too
+    assert every[3].blr.data_weight == 100.0  # the default's
+    weight_100 = run_config(
+        by["Farsighter (data weight 100)"], QUICK, 3, tmp_path, (chain_id(10), 10_000)
+    )
+    assert dataclasses.replace(weight_100, run_dir="") == dataclasses.replace(every[3], run_dir="")
     configs = [
         run_config(by[label], QUICK, 3, tmp_path, (chain_id(10), 10_000))
         for label in StudyConfig().agents

@@ -350,8 +350,10 @@ AGENTS: tuple[Agent, ...] = (
     # each minibatch row weighs 100 times train_every / batch_size in the posterior's statistics:
     # its mean follows a rarely seen reward from a few samples where the default's needs the
     # row's whole time in the replay, while its width where the run has not been stays the
-    # prior's (benchmarks/deepsea_frontier.py --set blr.data_weight=100)
+    # prior's (benchmarks/deepsea_frontier.py --set blr.data_weight=100): the default since
+    # docs/results/explore/dataweight-*; 1 before it (every study in docs/results made before)
     Agent("Farsighter (data weight 100)", "farsighter", {"blr.data_weight": 100.0}),
+    Agent("Farsighter (data weight 1)", "farsighter", {"blr.data_weight": 1.0}),
 )
 COLORS = {a.label: f"C{i}" for i, a in enumerate(AGENTS)}
 _NAMED_ONLY = (
@@ -365,11 +367,13 @@ _NAMED_ONLY = (
     "Farsighter (prior 10)",
     "Farsighter (Fourier features)",
     "Farsighter (data weight 100)",
+    "Farsighter (data weight 1)",
 )
 DEFAULT_AGENTS = tuple(a.label for a in AGENTS if a.label not in _NAMED_ONLY)
 """The default list: every agent once but those run only when named. "Farsighter (redraw k)" and
-"Farsighter (random features)" build the same config as "Farsighter" now that a draw held for k
-steps and the random features are the defaults (the saved studies in docs/results name them);
+"Farsighter (random features)" and "Farsighter (data weight 100)" build the same config as
+"Farsighter" now that a draw held for k steps, the random features and the data weight 100 are the
+defaults (the saved studies in docs/results name them);
 the two mean-target variants belong to the comparison of the targets
 (docs/results/explore/targets), and "Farsighter (learned features)" to that of the features."""
 
