@@ -111,6 +111,15 @@ RUNS: dict[str, tuple[str, str, int, dict[str, Any]]] = {
 }
 
 
+def _drop(state: Any, keys: frozenset[str]) -> Any:
+    """``state`` without the dict entries named in ``keys``, at any depth."""
+    if isinstance(state, dict):
+        return {k: _drop(v, keys) for k, v in state.items() if k not in keys}
+    if isinstance(state, list | tuple):
+        return [_drop(v, keys) for v in state]
+    return state
+
+
 def _leaves(state: Any) -> list[bytes]:
     """Bytes of every floating-point tensor / array in a nested state (order-free)."""
     if isinstance(state, torch.Tensor):
@@ -134,7 +143,7 @@ def weights_hash(state: Any) -> tuple[str, int]:
     return hashlib.sha256("".join(digests).encode()).hexdigest(), len(digests)
 
 
-def run_hash(name: str, root: Path) -> dict[str, Any]:
+def run_hash(name: str, root: Path, ignore: frozenset[str] = frozenset()) -> dict[str, Any]:
     algo, env, steps, overrides = RUNS[name]
     values = dict(overrides)
     preset = values.pop("preset")
@@ -155,7 +164,7 @@ def run_hash(name: str, root: Path) -> dict[str, Any]:
     )
     summary = train(cfg)
     state = torch.load(root / name / "policy.pt", map_location="cpu", weights_only=False)
-    digest, leaves = weights_hash(state)
+    digest, leaves = weights_hash(_drop(state, ignore))
     return {"sha256": digest, "tensors": leaves, "final_eval_return": summary["final_eval_return"]}
 
 
@@ -164,12 +173,19 @@ def main() -> None:
     parser.add_argument("--name", default="weights_hash", help="results file name")
     parser.add_argument("--compare", default="", help="an earlier results file name to compare")
     parser.add_argument("--only", nargs="*", default=None, help="run names (default: all)")
+    parser.add_argument(
+        "--ignore-keys",
+        nargs="*",
+        default=[],
+        help="state entries to leave out of the hash (a statistic a change adds: its other "
+        "tensors can still be compared with a run from before it)",
+    )
     args = parser.parse_args()
     names = args.only or list(RUNS)
     torch.set_num_threads(1)
     with tempfile.TemporaryDirectory() as tmp:
-        runs = {name: run_hash(name, Path(tmp)) for name in names}
-    figures: dict[str, Any] = {"runs": runs}
+        runs = {name: run_hash(name, Path(tmp), frozenset(args.ignore_keys)) for name in names}
+    figures: dict[str, Any] = {"runs": runs, "ignored_keys": args.ignore_keys}
     if args.compare:
         before = json.loads((RESULTS / f"{args.compare}.json").read_text())["runs"]
         same = {n: before[n]["sha256"] == r["sha256"] for n, r in runs.items() if n in before}
