@@ -152,8 +152,9 @@ PRESETS: dict[str, Preset] = {
             "(Adam 1e-3, an update every 4 steps on 64 transitions from the whole replay, a "
             "target copy every 500 steps, 128 x 128) for every agent, with a posterior that "
             "stays fresh and scaled and whose uncertainty propagates, and (Farsighter) over "
-            "learned and 512 random features of the observation, with a draw held for the k "
-            "steps of its target, so that Thompson exploration works on tasks "
+            "learned and 512 random features of the observation, each row weighing 100 times "
+            "its share in the statistics, with a draw held for the k steps of its target, so "
+            "that Thompson exploration works on tasks "
             "nobody tuned it for (docs/results/explore). Reproduce "
             "the paper with --preset control or atari.",
             "Farsighter paper Table 1 (control column) for gamma and the BLR values; the "
