@@ -71,7 +71,8 @@ def random_features_note(width: int, obs_shape: tuple[int, ...], env: str) -> st
     if obs_shape[0] > width:
         return (
             f"farsighter: note: {env}'s observation has {obs_shape[0]} entries, more than the "
-            f"{width} random features (blr.random_features); once a run has visited about "
+            f"{width} random features (blr.random_features, widened up to "
+            "blr.random_features_max); once a run has visited about "
             f"{width} distinct states, new ones stop looking new to the posterior. A wider "
             "layer keeps them apart, at O(width^2) a step"
         )
@@ -92,7 +93,9 @@ def train(cfg: Config, callbacks: Sequence[Callback] = ()) -> dict[str, Any]:
     )  # a bad id fails before the run dir is touched
     obs_space, act_space = envs.single_observation_space, envs.single_action_space
     check_spaces(cfg.algo, obs_space, act_space)
-    note = random_features_note(cfg.blr.random_features, tuple(obs_space.shape or ()), cfg.env)
+    obs_shape = tuple(obs_space.shape or ())
+    width = cfg.blr.random_feature_width(int(np.prod(obs_shape)))
+    note = random_features_note(width, obs_shape, cfg.env)
     if note:
         print(note, file=sys.stderr)
     overlap = overlap_enabled(cfg.runtime.overlap_env, envs, device)

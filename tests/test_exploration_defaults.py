@@ -458,6 +458,8 @@ def test_auto_gives_discrete_tasks_the_general_preset_and_keeps_table_1_selectab
     )
     assert (cfg.blr.target, cfg.blr.redraw, cfg.k_target, cfg.k) == ("sample", "k", "max", 10)
     assert (cfg.blr.random_features, cfg.blr.data_weight) == (512, 100.0)
+    assert cfg.blr.random_features_max == 1024  # widened to the observation, up to 1,024
+    assert make_config("bdqn", "farsighter/Chain10-v0").blr.random_features_max == 0
     assert make_config("bdqn", "farsighter/Chain10-v0").blr.data_weight == 1.0  # Farsighter's
     cartpole = make_config("farsighter", "CartPole-v1", preset="cartpole")  # as measured
     assert (cartpole.blr.redraw, cartpole.k_target) == ("episode", "max")

@@ -201,6 +201,7 @@ def test_agents_are_one_config_each_on_the_auto_preset(tmp_path: Path) -> None:
         "Farsighter (Fourier features)",
         "Farsighter (data weight 100)",
         "Farsighter (data weight 1)",
+        "Farsighter (fixed width)",
     ]
     by = {a.label: a for a in AGENTS}
     # the default list trains no config twice, and leaves out the variants run only when named
@@ -216,10 +217,11 @@ def test_agents_are_one_config_each_on_the_auto_preset(tmp_path: Path) -> None:
         "Farsighter (Fourier features)",
         "Farsighter (data weight 100)",
         "Farsighter (data weight 1)",
+        "Farsighter (fixed width)",
     }
     assert not named_only & set(StudyConfig().agents)
     assert "Farsighter (redraw step)" in StudyConfig().agents
-    assert len(StudyConfig().agents) == len(AGENTS) - 11
+    assert len(StudyConfig().agents) == len(AGENTS) - 12
     every = [
         run_config(a, QUICK, 3, tmp_path, (chain_id(10), 10_000))
         for a in AGENTS
@@ -254,6 +256,9 @@ def test_agents_are_one_config_each_on_the_auto_preset(tmp_path: Path) -> None:
     assert by["Farsighter (centred draw)"].overrides == {"blr.center_sample": True}
     fourier = run_config(by["Farsighter (Fourier features)"], QUICK, 3, tmp_path, (chain_id(10), 1))
     assert (fourier.blr.random_features_kind, fourier.blr.random_features) == ("fourier", 512)
+    fixed = run_config(by["Farsighter (fixed width)"], QUICK, 3, tmp_path, (chain_id(10), 1))
+    assert (fixed.blr.random_features, fixed.blr.random_features_max) == (512, 0)
+    assert every[3].blr.random_features_max == 1024  # the default's
     cfg = run_config(by["Farsighter (redraw step)"], QUICK, 3, tmp_path, (chain_id(10), 10_000))
     assert cfg == make_config(
         "farsighter",

@@ -156,6 +156,8 @@ def test_random_features_are_checked_and_their_seeds_batch(
 ) -> None:
     with pytest.raises(ConfigError, match="blr.random_features must be >= 0"):
         validate(make_config("farsighter", "CartPole-v1", **{"blr.random_features": -1}))
+    with pytest.raises(ConfigError, match="blr.random_features_max must be >= 0"):
+        validate(make_config("farsighter", "CartPole-v1", **{"blr.random_features_max": -1}))
     cfg = make_config("farsighter", "CartPole-v1", **{"blr.random_features": 32})
     learned = make_config("farsighter", "CartPole-v1", **{"blr.random_features": 0})
     # the fixed random layer stacks as buffers, so seeds batch with or without it

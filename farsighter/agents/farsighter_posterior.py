@@ -72,10 +72,9 @@ def seeded_torso(
     def build() -> tuple[Torso, torch.Tensor]:
         torso: Torso = make_torso(obs_space, cfg.hidden_sizes)
         if cfg.blr.random_features and isinstance(torso, MLPTorso):  # images: learned alone
-            width = cfg.blr.random_features
-            torso = RandomFeatureTorso(
-                torso, int(np.prod(obs_space.shape)), width, cfg.blr.random_features_kind
-            )
+            entries = int(np.prod(obs_space.shape))
+            width = cfg.blr.random_feature_width(entries)
+            torso = RandomFeatureTorso(torso, entries, width, cfg.blr.random_features_kind)
         return torso, nn.Linear(torso.out_dim, num_actions, bias=False).weight.detach()
 
     return build_seeded(cfg.seed, build)  # type: ignore[no-any-return]

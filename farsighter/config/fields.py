@@ -71,6 +71,13 @@ class BLRConfig:
     posterior's uncertainty narrows where the run has been and stays wide elsewhere. Flat
     observations only: image torsos keep the learned features alone (a run says so on stderr).
     0: the learned features alone (the paper). Our extension, not the paper's."""
+    random_features_max: int = 0
+    """When above ``random_features``: the random layer widens to the observation's number of
+    entries, up to this width. A layer narrower than its input has fewer directions than a
+    one-hot observation has states, so once a run has visited about that many states new ones
+    stop looking new to the posterior (docs/design.md, "Why a fixed random layer runs out at
+    depth"); the cost is O(width^2) a row and O(width^3) a refresh. 0: ``random_features``
+    whatever the observation. Our extension."""
     random_features_kind: Literal["relu", "fourier"] = "relu"
     """The random features' map: relu, psi(s) = relu(W s + b) / sqrt(width) with W, b standard
     normal; fourier, psi(s) = sqrt(2 / width) cos(W s + b) with W ~ N(0, 1 / 0.25) and b uniform
@@ -101,7 +108,20 @@ class BLRConfig:
                 self.random_features >= 0,
                 f"blr.random_features must be >= 0 (0: none; got {self.random_features})",
             ),
+            (
+                self.random_features_max >= 0,
+                "blr.random_features_max must be >= 0 (0: no widening; got "
+                f"{self.random_features_max})",
+            ),
         ]
+
+    def random_feature_width(self, obs_entries: int) -> int:
+        """The random layer's width on flat observations of ``obs_entries`` entries:
+        ``random_features``, widened to ``obs_entries`` up to ``random_features_max``; 0 when
+        there are no random features."""
+        if not self.random_features:
+            return 0
+        return max(self.random_features, min(obs_entries, self.random_features_max))
 
 
 @dataclass(frozen=True)

@@ -120,6 +120,12 @@ _FRESH_PER_ALGO: dict[str, dict[str, Any]] = {
 #   30-state chain 5/5 in 657 episodes (1,008); MountainCar 3/3 in 25k steps (35k), Acrobot
 #   3/3 in 30k (15k) (docs/design.md "How much a sample weighs",
 #   docs/results/explore/dataweight-*).
+# - The random layer widens to the observation's entries, up to 1,024 (blr.random_features_max):
+#   W features give at most W directions, so past about W visited one-hot cells new ones stop
+#   looking new. Observations of at most 512 entries keep their 512 features bit for bit; deep
+#   sea N = 24 (576 wide) solved 5/5 (bsuite 5/5; 512 wide: 4/5), N = 30 (900 wide) 2/5 (bsuite
+#   2/5; 512 wide: 0/5) (docs/design.md "A random layer as wide as the observation",
+#   docs/results/explore/widen-deepsea).
 _GENERAL_PER_ALGO: dict[str, dict[str, Any]] = {
     **_FRESH_PER_ALGO,
     "farsighter": {
@@ -127,6 +133,7 @@ _GENERAL_PER_ALGO: dict[str, dict[str, Any]] = {
         "sample_recent": False,
         "blr.redraw": "k",
         "blr.random_features": 512,
+        "blr.random_features_max": 1024,
         "blr.data_weight": 100.0,
     },
 }
@@ -152,7 +159,8 @@ PRESETS: dict[str, Preset] = {
             "(Adam 1e-3, an update every 4 steps on 64 transitions from the whole replay, a "
             "target copy every 500 steps, 128 x 128) for every agent, with a posterior that "
             "stays fresh and scaled and whose uncertainty propagates, and (Farsighter) over "
-            "learned and 512 random features of the observation, each row weighing 100 times "
+            "learned and 512 random features of the observation (as many as it has entries, up "
+            "to 1,024), each row weighing 100 times "
             "its share in the statistics, with a draw held for the k steps of its target, so "
             "that Thompson exploration works on tasks "
             "nobody tuned it for (docs/results/explore). Reproduce "

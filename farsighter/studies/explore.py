@@ -354,6 +354,9 @@ AGENTS: tuple[Agent, ...] = (
     # docs/results/explore/dataweight-*; 1 before it (every study in docs/results made before)
     Agent("Farsighter (data weight 100)", "farsighter", {"blr.data_weight": 100.0}),
     Agent("Farsighter (data weight 1)", "farsighter", {"blr.data_weight": 1.0}),
+    # the random layer 512 wide whatever the observation, against the default's, widened to the
+    # observation's entries up to 1,024 (blr.random_features_max; deep sea N = 30: 900)
+    Agent("Farsighter (fixed width)", "farsighter", {"blr.random_features_max": 0}),
 )
 COLORS = {a.label: f"C{i}" for i, a in enumerate(AGENTS)}
 _NAMED_ONLY = (
@@ -368,6 +371,7 @@ _NAMED_ONLY = (
     "Farsighter (Fourier features)",
     "Farsighter (data weight 100)",
     "Farsighter (data weight 1)",
+    "Farsighter (fixed width)",
 )
 DEFAULT_AGENTS = tuple(a.label for a in AGENTS if a.label not in _NAMED_ONLY)
 """The default list: every agent once but those run only when named. "Farsighter (redraw k)" and
