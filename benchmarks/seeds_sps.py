@@ -15,7 +15,7 @@ alone and the batch. Rounds interleave the entries, so that the machine's drift
 falls on all of them alike.
 
     python -m benchmarks.seeds_sps [--algo ddqn|farsighter|rnd] [--tasks cartpole deepsea]
-        [--seeds 16] [--rounds 2]
+        [--seeds 16 [64 ...]] [--rounds 2] [--device cpu|cuda]
 
 ``--algo farsighter`` runs Farsighter (the library's defaults: the ``general`` preset, k = 10,
 a draw held for k steps) with the same task settings (``--tasks mountaincar``: MountainCar-v0
@@ -57,10 +57,16 @@ def task_spec(task: str) -> tuple[str, int, dict[str, Any]]:
 
 
 def _config(
-    env: str, steps: int, values: dict[str, Any], tmp: str, threads: int, algo: str = "ddqn"
+    env: str,
+    steps: int,
+    values: dict[str, Any],
+    tmp: str,
+    threads: int,
+    algo: str = "ddqn",
+    device: str = "cpu",
 ) -> Any:
-    """``algo`` on ``env`` as every entry runs it: CPU, no evaluation before the final one,
-    quiet (Farsighter with its defaults: the random-feature torso of the general preset)."""
+    """``algo`` on ``env`` as every entry runs it: on ``device``, no evaluation before the final
+    one, quiet (Farsighter with its defaults: the random-feature torso of the general preset)."""
     from farsighter import make_config
 
     return make_config(
@@ -69,7 +75,7 @@ def _config(
         total_steps=steps,
         run_dir=f"{tmp}/run",
         torch_threads=threads,
-        device="cpu",
+        device=device,
         eval_every=0,
         eval_episodes=1,
         progress=False,
@@ -78,7 +84,13 @@ def _config(
 
 
 def run_one(
-    env: str, steps: int, values: dict[str, Any], seeds: int, threads: int, algo: str = "ddqn"
+    env: str,
+    steps: int,
+    values: dict[str, Any],
+    seeds: int,
+    threads: int,
+    algo: str = "ddqn",
+    device: str = "cpu",
 ) -> dict[str, Any]:
     import torch
 
@@ -101,7 +113,7 @@ def run_one(
 
     RunLog.end_of_training = mark_end  # type: ignore[method-assign]
     with tempfile.TemporaryDirectory() as tmp:
-        cfg = _config(env, steps, values, tmp, threads, algo)
+        cfg = _config(env, steps, values, tmp, threads, algo, device)
         start = time.perf_counter()
         if seeds == 0:
             summaries = [train(dataclasses.replace(cfg, seed=1))]
@@ -114,6 +126,7 @@ def run_one(
         "seeds": max(seeds, 1),
         "alone": seeds == 0,
         "threads": threads,
+        "device": device,
         "steps_per_seed": steps,
         "wall_s": round(wall, 2),
         "total_sps": round(max(seeds, 1) * steps / wall, 1),
@@ -172,7 +185,12 @@ def profile_one(
 
 
 def measure(
-    task: str, seeds: int, threads: int, phases: bool = False, algo: str = "ddqn"
+    task: str,
+    seeds: int,
+    threads: int,
+    phases: bool = False,
+    algo: str = "ddqn",
+    device: str = "cpu",
 ) -> dict[str, Any]:
     from benchmarks.atari_sps import child_env, fail, run_child
 
@@ -186,10 +204,11 @@ def measure(
             "threads": threads,
             "phases": phases,
             "algo": algo,
+            "device": device,
         }
     )
     cmd = [sys.executable, str(Path(__file__).resolve()), "--one", spec]
-    env = {**child_env(threads), "PYTHONPATH": str(REPO)}
+    env = child_env(threads)  # the repository first on the path, a PYTHONPATH set here after it
     rc, lines, _ = run_child(cmd, REPO, env)
     rows = [text[len(TAG) :] for _, text in lines if text.startswith(TAG)]
     if rc != 0 or not rows:
@@ -201,7 +220,15 @@ def main() -> None:
     p = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawTextHelpFormatter)
     p.add_argument("--algo", choices=("ddqn", "farsighter", "rnd"), default="ddqn")
     p.add_argument("--tasks", nargs="+", choices=TASKS, default=["cartpole", "deepsea"])
-    p.add_argument("--seeds", type=int, default=16, help="seeds in the batch")
+    p.add_argument(
+        "--seeds", type=int, nargs="+", default=[16], help="seeds in a batch (one entry each)"
+    )
+    p.add_argument(
+        "--device",
+        default="cpu",
+        choices=("cpu", "cuda"),
+        help="cuda: every entry on the GPU, the batches with one host thread",
+    )
     p.add_argument("--rounds", type=int, default=2)
     p.add_argument("--name", default="seeds_sps")
     p.add_argument("--phases", action="store_true", help="time the phases of a batch step")
@@ -214,7 +241,13 @@ def main() -> None:
             row = profile_one(spec["env"], spec["steps"], values, spec["seeds"], spec["algo"])
         else:
             row = run_one(
-                spec["env"], spec["steps"], values, spec["seeds"], spec["threads"], spec["algo"]
+                spec["env"],
+                spec["steps"],
+                values,
+                spec["seeds"],
+                spec["threads"],
+                spec["algo"],
+                spec.get("device", "cpu"),
             )
         print(TAG + json.dumps(row))
         return
@@ -223,13 +256,16 @@ def main() -> None:
     if args.phases:
         rows = []
         for task in args.tasks:
-            print(f"{task}: phases of a {args.seeds}-seed batch step", file=sys.stderr, flush=True)
-            rows.append({**measure(task, args.seeds, 1, phases=True, algo=args.algo), "task": task})
+            seeds = args.seeds[0]
+            print(f"{task}: phases of a {seeds}-seed batch step", file=sys.stderr, flush=True)
+            rows.append({**measure(task, seeds, 1, phases=True, algo=args.algo), "task": task})
             print(f"  {rows[-1]['us_per_batch_step']}", file=sys.stderr, flush=True)
         write_result("seeds_profile" if args.name == "seeds_sps" else args.name, {"runs": rows})
         return
 
-    entries = [(0, 1), (args.seeds, 1), (args.seeds, 2)]  # (seeds, threads); 0 = alone
+    # (seeds, threads); 0 = alone. On a GPU the host thread count hardly matters: one each.
+    threads = (1,) if args.device == "cuda" else (1, 2)
+    entries = [(0, 1)] + [(s, t) for s in args.seeds for t in threads]
     runs = []
     for round_ in range(args.rounds):
         for task in args.tasks:
@@ -239,7 +275,8 @@ def main() -> None:
                     file=sys.stderr,
                     flush=True,
                 )
-                runs.append({**measure(task, seeds, threads, algo=args.algo), "round": round_ + 1})
+                row = measure(task, seeds, threads, algo=args.algo, device=args.device)
+                runs.append({**row, "round": round_ + 1})
                 print(f"  {runs[-1]['total_sps']} steps/s", file=sys.stderr, flush=True)
     ratios = {}
     for task in args.tasks:
@@ -254,7 +291,8 @@ def main() -> None:
         args.name,
         {
             "algo": args.algo,
-            "goal": f"{args.seeds} seeds >= {GOAL}x one seed alone",
+            "device": args.device,
+            "goal": f"16 seeds >= {GOAL}x one seed alone (on 2 CPU cores)",
             "ratio_to_alone": ratios,
             "runs": runs,
         },
