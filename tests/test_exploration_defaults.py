@@ -348,10 +348,8 @@ def test_sample_target_adds_the_posterior_spread(tmp_path: Path) -> None:
     assert y_sample.mean() > y_mean[0]  # the max over noisy values is optimistic
 
 
-def test_k_target_max_is_the_larger_of_the_k_and_one_step_targets(
-    tmp_path: Path, monkeypatch: pytest.MonkeyPatch
-) -> None:
-    agent = make_agent(tmp_path, k=4, k_target="max")
+def _feed(agent: FarsighterAgent) -> None:
+    """300 random transitions, an episode end every 25."""
     feed_rng = np.random.default_rng(3)
     for t in range(300):
         end = t % 25 == 24
@@ -366,6 +364,13 @@ def test_k_target_max_is_the_larger_of_the_k_and_one_step_targets(
                 [obs[0]] if end else None,
             )
         )
+
+
+def test_k_target_max_is_the_larger_of_the_k_and_one_step_targets(
+    tmp_path: Path, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    agent = make_agent(tmp_path, k=4, k_target="max")
+    _feed(agent)
     captured: dict[str, list[torch.Tensor]] = {"ys": [], "trained": []}
     original = agent.loss.targets
 
@@ -388,6 +393,39 @@ def test_k_target_max_is_the_larger_of_the_k_and_one_step_targets(
     assert y_k.shape == y_1.shape == trained.shape
     assert (y_1 > y_k).any() and (y_k > y_1).any()
     assert torch.equal(trained, torch.maximum(y_k, y_1))
+
+
+def test_k_target_max_mean_lets_the_posterior_mean_choose_and_keeps_the_draw(
+    tmp_path: Path, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    agent = make_agent(tmp_path, k=4, k_target="max-mean", **{"blr.target": "sample"})
+    assert agent.cfg.blr.target == "sample"  # the targets carry a draw
+    _feed(agent)
+    captured: dict[str, list[torch.Tensor]] = {"pairs": [], "trained": []}
+    original = agent.loss.target_and_mean
+
+    def spy(t, *args):  # every (drawn, mean) target pair of one update
+        pair = original(t, *args)
+        captured["pairs"].append(pair)
+        return pair
+
+    def loss_spy(q, y, kind):
+        captured["trained"].append(y.detach().clone())
+        return td_loss(q, y, kind)
+
+    agent.loss.target_and_mean = spy  # type: ignore[method-assign]
+    monkeypatch.setattr(farsighter_module, "td_loss", loss_spy)
+    agent.update()
+    (y_k, mean_k), (y_1, mean_1) = captured["pairs"]
+    (trained,) = captured["trained"]
+    assert mean_k is not None and mean_1 is not None
+    one_wins = mean_1 > mean_k
+    assert one_wins.any() and (~one_wins).any()
+    # each row trains on the chosen target with its own draw, not on the mean
+    assert torch.equal(trained, torch.where(one_wins, y_1, y_k))
+    assert not torch.equal(trained, torch.where(one_wins, mean_1, mean_k))
+    # where the draws disagree with the means, it is not the larger drawn target
+    assert not torch.equal(trained, torch.maximum(y_k, y_1))
 
 
 def _sampled_rows(preset: str, tmp_path: Path) -> tuple[np.ndarray, int, FarsighterAgent]:
@@ -499,7 +537,7 @@ def test_auto_gives_discrete_tasks_the_general_preset_and_keeps_table_1_selectab
 
 
 def test_k_target_max_is_refused_where_it_does_nothing() -> None:
-    with pytest.raises(ConfigError, match="k_target max is only supported by --algo bdqn and"):
+    with pytest.raises(ConfigError, match="k_target max and max-mean are only supported by --algo bdqn and"):
         validate(make_config("kddqn", "CartPole-v1", k_target="max"))
 
 

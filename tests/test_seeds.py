@@ -62,7 +62,7 @@ def _files(run: Path) -> dict[str, list[str]]:
             {"preset": "general", "blr__random_features_kind": "fourier", "batch_size": 24},
         ),
         # held draws redrawn on a revisit, two envs a seed, clipping that bites, k = 3, over the
-        # learned features alone
+        # learned features alone, the k-step or one-step target chosen by the posterior mean
         (
             "farsighter",
             "farsighter/DeepSea6-v0",
@@ -70,6 +70,7 @@ def _files(run: Path) -> dict[str, list[str]]:
                 "preset": "general",
                 "blr__random_features": 0,
                 "k": 3,
+                "k_target": "max-mean",
                 "num_envs": 2,
                 "max_grad_norm": 0.5,
                 "blr__redraw": "revisit",

@@ -142,7 +142,7 @@ class FarsighterAgent:
         except ValueError:  # not enough complete k-step windows yet
             return None
         inputs = batch_tensors(batch, self.device).tensors()
-        if self.cfg.k_target == "max" and self.counters.k > 1:
+        if self.cfg.k_target != "k" and self.counters.k > 1:
             # The larger of the k-step and the one-step target of the same start (lower-bound
             # Q-learning, Tang 2020): see Config.k_target. Same s and a, so only s', r, gamma.
             one_inputs, one = one_step_inputs(self.replay, batch, self.cfg.gamma, self.device)

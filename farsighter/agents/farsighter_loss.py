@@ -11,7 +11,8 @@ sqrt(cov_scale) phi_target(s')^T U_a z, is added to both Q's of s' (optimism tha
 drawn as sqrt(cov_scale) ||U_a^T phi_target(s')|| eps, the same distribution from one normal per
 row and action: ``BLRHead.q_noise_rows``);
 with ``k_target = max`` the target is the larger of the k-step and the one-step target of the
-same start (both our extensions: ``Config.k_target``, ``BLRConfig.target``).
+same start, with ``max-mean`` the one larger under the posterior mean (our extensions:
+``Config.k_target``, ``BLRConfig.target``).
 
 The loss owns the target torso and the target mean, which move only at the hard copy (Algorithm
 1 line 8: :meth:`FarsighterLoss.copy_target`). It draws nothing: the acting draw and the normals
@@ -49,7 +50,7 @@ class FarsighterLoss:
         # target features of s' kept per replay row until the next copy (eager runs only)
         self.target = CachedTarget(self.torso_target, cache)
         self.target_mean_AD = head.mean_AD.clone()
-        self.kind, self.blr = cfg.loss, cfg.blr
+        self.kind, self.blr, self.k_target = cfg.loss, cfg.blr, cfg.k_target
 
     def copy_target(self) -> None:
         """Algorithm 1 line 8: target torso and target mean <- online ones (in place)."""
@@ -62,13 +63,25 @@ class FarsighterLoss:
     ) -> torch.Tensor:
         """y of Eq. 8 with k-step returns; ``draws``: ``w_online_AD`` (thompson) or ``eps_BA``
         (sample); ``phi_next_target``: phi_target(s') when the cache gave it."""
+        return self.target_and_mean(t, draws, phi_next_target, with_mean=False)[0]
+
+    @torch.no_grad()
+    def target_and_mean(
+        self,
+        t: TensorBatch,
+        draws: Tensors,
+        phi_next_target: torch.Tensor | None = None,
+        with_mean: bool = True,
+    ) -> tuple[torch.Tensor, torch.Tensor | None]:
+        """:meth:`targets`, and (``with_mean``) the same target under the posterior mean, no
+        draw added (``k_target = max-mean`` chooses by it); else None."""
         if phi_next_target is None:
             phi_next, phi_next_target = online_and_target(
                 self.torso, self.torso_target, t.next_obs_B
             )
         else:
             phi_next = self.torso(t.next_obs_B)
-        return eq8_targets(
+        y_B = eq8_targets(
             self.head,
             self.target_mean_AD,
             self.blr.target,
@@ -78,6 +91,10 @@ class FarsighterLoss:
             draws,
             self.blr.center_sample,
         )
+        if not with_mean:
+            return y_B, None
+        mean = eq8_targets(self.head, self.target_mean_AD, "mean", t, phi_next, phi_next_target, {})
+        return y_B, mean
 
     @torch.no_grad()
     def posterior_targets(self, t: TensorBatch, draws: Tensors) -> torch.Tensor:
@@ -93,10 +110,20 @@ class FarsighterLoss:
         ``k_target = max`` the one-step windows' ``one_*`` fields); in incremental mode also the
         features and regression targets the posterior's statistics add."""
         t = TensorBatch.of(inputs)
-        y_B = self.targets(t, inputs, inputs.get("phi_next_target_BD"))
-        if "one_next_obs_B" in inputs:  # k_target = max: same s and a, so only s', r, gamma
+        cached = inputs.get("phi_next_target_BD")
+        if "one_next_obs_B" not in inputs:
+            y_B = self.targets(t, inputs, cached)
+        elif self.k_target == "max-mean":  # the one larger under the mean, with its draw
+            y_B, mean_B = self.target_and_mean(t, inputs, cached)
+            one_B, one_mean_B = self.target_and_mean(
+                one_step_batch(t, inputs),
+                one_step_draws(inputs),
+                inputs.get("one_phi_next_target_BD"),
+            )
+            y_B = k_or_one_step(y_B, one_B, mean_B, one_mean_B)
+        else:  # k_target = max: same s and a, so only s', r, gamma
             y_B = torch.maximum(
-                y_B,
+                self.targets(t, inputs, cached),
                 self.targets(
                     one_step_batch(t, inputs),
                     one_step_draws(inputs),
@@ -162,6 +189,22 @@ def eq8_targets(
         return y_B
     y_mean_B = double_q_target(t.returns_B, t.bootstrap_B, q_next_online, q_next_target)
     return centered_optimism(y_B, y_mean_B, t.bootstrap_B)
+
+
+def k_or_one_step(
+    y_B: torch.Tensor,
+    one_B: torch.Tensor,
+    mean_B: torch.Tensor | None = None,
+    one_mean_B: torch.Tensor | None = None,
+) -> torch.Tensor:
+    """The k-step target ``y_B`` or the one-step target ``one_B`` of each start: the larger
+    (``k_target = max``), or, given both targets under the posterior mean (``max-mean``), the
+    one whose mean is larger, with its draw. Taking the larger of two noisy targets keeps the
+    larger noise, an upward bias each update that bootstrapping adds up; choosing by the means
+    lets no draw choose."""
+    if mean_B is None or one_mean_B is None:
+        return torch.maximum(y_B, one_B)
+    return torch.where(one_mean_B > mean_B, one_B, y_B)
 
 
 def max_targets(

@@ -59,14 +59,20 @@ class SeedParts:
 
     @torch.no_grad()
     def y(
-        self, t: TensorBatch, phi_next: torch.Tensor, phi_next_target: torch.Tensor, draws: Tensors
+        self,
+        t: TensorBatch,
+        phi_next: torch.Tensor,
+        phi_next_target: torch.Tensor,
+        draws: Tensors,
+        kind: str | None = None,
     ) -> torch.Tensor:
-        """y of Eq. 8 under this seed's posterior and target mean."""
+        """y of Eq. 8 under this seed's posterior and target mean (``kind``: ``blr.target``
+        unless given; ``mean`` for the target under the posterior mean)."""
         head, blr = self.head, self.cfg.blr
         return eq8_targets(
             head,
             self.target_mean_AD,
-            blr.target,
+            blr.target if kind is None else kind,
             t,
             phi_next,
             phi_next_target,

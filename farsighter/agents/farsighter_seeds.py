@@ -31,6 +31,7 @@ from farsighter.agents.common import (
 )
 from farsighter.agents.cuda_graph import Tensors
 from farsighter.agents.farsighter_loss import (
+    k_or_one_step,
     max_targets,
     one_step_batch,
     one_step_draws,
@@ -157,7 +158,7 @@ class SeedBatchFarsighter:
             return None
         t = batch_tensors(batch, self.device)
         inputs: Tensors = t.tensors()
-        one_step = cfg.k_target == "max" and k > 1
+        one_step = cfg.k_target != "k" and k > 1
         ends = {"": batch.index + batch.steps}  # the logical rows of s', for the target caches
         if one_step:  # the larger of the k-step and the one-step target (FarsighterAgent.update)
             one_inputs, one = one_step_inputs(self.replay, batch, cfg.gamma, self.device)
@@ -232,7 +233,13 @@ class SeedBatchFarsighter:
             return y_B
         one = one_step_batch(t, mine)
         one_next, one_next_target = features["one_"]
-        return torch.maximum(y_B, p.y(one, one_next[s], one_next_target[s], one_step_draws(draws)))
+        one_B = p.y(one, one_next[s], one_next_target[s], one_step_draws(draws))
+        if self.cfg.k_target == "max":
+            return k_or_one_step(y_B, one_B)
+        mean_B = p.y(t, features[""][0][s], features[""][1][s], {}, "mean")
+        return k_or_one_step(
+            y_B, one_B, mean_B, p.y(one, one_next[s], one_next_target[s], {}, "mean")
+        )
 
     def _refresh(self, s: int, p: SeedParts) -> None:
         """Algorithm 1 line 6 for one seed (``FarsighterAgent.refresh_posterior``): a batch-mode

@@ -521,14 +521,17 @@ class Config:
     """Discount factor. Table 1: 0.99."""
     k: int = 1
     """Steps per return: 1 is one-step TD; k > 1 uses k-step returns with gamma^k bootstraps."""
-    k_target: Literal["k", "max"] = "k"
+    k_target: Literal["k", "max", "max-mean"] = "k"
     """k: the k-step target (section 4.4). max (bdqn, farsighter): the larger of the k-step and
     the one-step target of each sampled start. A k-step return follows the behaviour for k steps,
     so an exploratory episode that ended early makes it pessimistic and stops optimism from
     propagating; in a deterministic task every realised return is a lower bound on Q*, and the
     max keeps the one-step optimality target while the k-step return still carries found reward
     k steps back at once (lower-bound Q-learning, Tang 2020). Biased upwards where rewards or
-    transitions are noisy; one more forward pass per update. Our extension, not the paper's."""
+    transitions are noisy; one more forward pass per update. max-mean: the one of the two whose
+    value under the posterior mean is larger, with its draw (``blr.target sample``'s noise does
+    not choose, so the max of two draws adds no optimism of its own). Our extension, not the
+    paper's."""
     stride: bool = False
     """Algorithm 1 literally: one k-step tuple per k steps instead of one starting at every step."""
     batch_size: int = 32

@@ -357,6 +357,11 @@ AGENTS: tuple[Agent, ...] = (
     # the random layer 512 wide whatever the observation, against the default's, widened to the
     # observation's entries up to 1,024 (blr.random_features_max; deep sea N = 30: 900)
     Agent("Farsighter (fixed width)", "farsighter", {"blr.random_features_max": 0}),
+    # the k-step or the one-step target chosen by their values under the posterior mean, with
+    # the chosen one's draw, against the default's larger of the two drawn targets (whose
+    # upward bias, compounded by bootstrapping, lifts Q on DoorKey-5x5 to about 15 where no
+    # return exceeds 1: benchmarks/value_calibration.py)
+    Agent("Farsighter (max by mean)", "farsighter", {"k_target": "max-mean"}),
 )
 COLORS = {a.label: f"C{i}" for i, a in enumerate(AGENTS)}
 _NAMED_ONLY = (
@@ -372,6 +377,7 @@ _NAMED_ONLY = (
     "Farsighter (data weight 100)",
     "Farsighter (data weight 1)",
     "Farsighter (fixed width)",
+    "Farsighter (max by mean)",
 )
 DEFAULT_AGENTS = tuple(a.label for a in AGENTS if a.label not in _NAMED_ONLY)
 """The default list: every agent once but those run only when named. "Farsighter (redraw k)" and
