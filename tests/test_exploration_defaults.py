@@ -537,7 +537,9 @@ def test_auto_gives_discrete_tasks_the_general_preset_and_keeps_table_1_selectab
 
 
 def test_k_target_max_is_refused_where_it_does_nothing() -> None:
-    with pytest.raises(ConfigError, match="k_target max and max-mean are only supported by --algo bdqn and"):
+    with pytest.raises(
+        ConfigError, match="k_target max and max-mean are only supported by --algo bdqn and"
+    ):
         validate(make_config("kddqn", "CartPole-v1", k_target="max"))
 
 
