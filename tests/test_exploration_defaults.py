@@ -167,6 +167,35 @@ def test_sample_target_adds_the_rows_noise(tmp_path: Path) -> None:
     torch.testing.assert_close(shifted, 1 + 0.5 * (q_t + sd).gather(1, a_up[:, None])[:, 0])
 
 
+def test_sample_greedy_target_draws_the_value_of_the_means_greedy_action(tmp_path: Path) -> None:
+    """blr.target = sample-greedy: the argmax of s' under the posterior mean, and that action's
+    target Q with its row's draw added; where a draw would change the argmax (sample's choice)
+    the two targets differ, and over many rows the draw adds no optimism of its own."""
+    agent = make_agent(tmp_path, **{"blr.target": "sample-greedy", "k": 1})
+    loss, head = agent.loss, agent.head
+    n = 400
+    t = farsighter_module.TensorBatch(
+        obs_B=torch.randn(n, 4),
+        next_obs_B=torch.randn(n, 4),
+        actions_B=torch.zeros(n, dtype=torch.long),
+        returns_B=torch.ones(n),
+        bootstrap_B=torch.full((n,), 0.5),
+    )
+    eps = torch.randn(n, 2, generator=torch.Generator().manual_seed(0)) * 30
+    y = loss.targets(t, {"eps_BA": eps})
+    phi_t = loss.torso_target(t.next_obs_B)
+    q_t = phi_t @ loss.target_mean_AD.T
+    noise = head.predictive_var(phi_t).sqrt() * eps
+    a_mean = (agent.torso(t.next_obs_B) @ head.mean_AD.T).argmax(1)
+    torch.testing.assert_close(y, 1 + 0.5 * (q_t + noise).gather(1, a_mean[:, None])[:, 0])
+    # the default's target: the argmax over the drawn values, a different action in some rows
+    phi_next = agent.torso(t.next_obs_B)
+    args = (head, loss.target_mean_AD, "sample", t, phi_next, phi_t, {"eps_BA": eps})
+    y_sample = farsighter_module.eq8_targets(*args)
+    assert (y_sample > y + 1e-6).any()
+    assert y_sample.mean() > y.mean()
+
+
 def test_centred_sample_target_takes_out_the_minibatch_mean_optimism(tmp_path: Path) -> None:
     """blr.center_sample: the target the update trains on is the raw sampled target less each
     row's bootstrap factor times the minibatch's optimism per unit of bootstrap. So its

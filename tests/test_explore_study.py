@@ -203,6 +203,7 @@ def test_agents_are_one_config_each_on_the_auto_preset(tmp_path: Path) -> None:
         "Farsighter (data weight 1)",
         "Farsighter (fixed width)",
         "Farsighter (max by mean)",
+        "Farsighter (greedy-action draw)",
     ]
     by = {a.label: a for a in AGENTS}
     # the default list trains no config twice, and leaves out the variants run only when named
@@ -220,10 +221,11 @@ def test_agents_are_one_config_each_on_the_auto_preset(tmp_path: Path) -> None:
         "Farsighter (data weight 1)",
         "Farsighter (fixed width)",
         "Farsighter (max by mean)",
+        "Farsighter (greedy-action draw)",
     }
     assert not named_only & set(StudyConfig().agents)
     assert "Farsighter (redraw step)" in StudyConfig().agents
-    assert len(StudyConfig().agents) == len(AGENTS) - 13
+    assert len(StudyConfig().agents) == len(AGENTS) - 14
     every = [
         run_config(a, QUICK, 3, tmp_path, (chain_id(10), 10_000))
         for a in AGENTS

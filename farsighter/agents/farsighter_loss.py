@@ -162,6 +162,9 @@ class FarsighterLoss:
 # The math of the loss on given features, shared with the seed-batched agent
 # (farsighter.agents.farsighter_seeds), which computes the features of every seed at once.
 
+SAMPLED_TARGETS = ("sample", "sample-greedy")
+"""The ``blr.target`` values whose next-state value carries a posterior draw per row."""
+
 
 def eq8_targets(
     head: BLRHead,
@@ -175,16 +178,17 @@ def eq8_targets(
 ) -> torch.Tensor:
     """y of Eq. 8 from the online and target features of s' (``kind``: ``blr.target``): the
     double-Q target under the posterior mean (or the acting draw ``w_online_AD``), with the
-    per-row posterior noise of ``eps_BA`` added to both Q's for ``sample`` (``centered``:
-    ``blr.center_sample``, the minibatch's mean optimism taken out)."""
+    per-row posterior noise of ``eps_BA`` added to both Q's for ``sample`` (the argmax over the
+    drawn values), to the target Q alone for ``sample-greedy`` (the draw of the action greedy
+    under the mean: zero-mean noise) (``centered``: ``blr.center_sample``, the minibatch's mean
+    optimism taken out)."""
     q_next_online = phi_next @ draws.get("w_online_AD", head.mean_AD).T
     q_next_target = phi_next_target @ target_mean_AD.T
-    if kind != "sample":
+    if kind not in SAMPLED_TARGETS:
         return double_q_target(t.returns_B, t.bootstrap_B, q_next_online, q_next_target)
     noise_BA = head.q_noise_rows(phi_next_target, draws["eps_BA"])
-    y_B = double_q_target(
-        t.returns_B, t.bootstrap_B, q_next_online + noise_BA, q_next_target + noise_BA
-    )
+    chooser_BA = q_next_online if kind == "sample-greedy" else q_next_online + noise_BA
+    y_B = double_q_target(t.returns_B, t.bootstrap_B, chooser_BA, q_next_target + noise_BA)
     if not centered:
         return y_B
     y_mean_B = double_q_target(t.returns_B, t.bootstrap_B, q_next_online, q_next_target)
@@ -263,7 +267,7 @@ def target_draws(
     target and then of the one-step target (``sample``, from ``gen``)."""
     if kind == "thompson":
         return {"w_online_AD": acting_draw()}
-    if kind != "sample":
+    if kind not in SAMPLED_TARGETS:
         return {}
     draws = {"eps_BA": head.noise_eps(rows, gen)}
     if one_step:

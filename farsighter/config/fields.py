@@ -48,7 +48,7 @@ class BLRConfig:
     a fixed greedy policy walks; farsighter.exploration.revisit). Our extension, not the paper's."""
     redraw_every: int = 1
     """T for ``redraw=every``."""
-    target: Literal["mean", "thompson", "sample"] = "mean"
+    target: Literal["mean", "thompson", "sample", "sample-greedy"] = "mean"
     """Value of the next state in the Q-loss target. mean: argmax and value under the posterior
     mean (Eq. 8). thompson: argmax under the latest acting Thompson draw, one weight set for the
     whole minibatch (the BDQN authors' code). sample: a fresh posterior draw per target row is
@@ -56,7 +56,11 @@ class BLRConfig:
     the next state raises the target: optimism propagates back along the chain of bootstraps,
     as in randomised value functions (Osband et al. 2019); our extension, not the paper's. With
     gamma = 1 that optimism is not discounted along loops (on the bridge maze, with the general
-    posterior, Farsighter failed 2 of 2 seeds that the maze preset solves: docs/results/explore)."""
+    posterior, Farsighter failed 2 of 2 seeds that the maze preset solves: docs/results/explore).
+    sample-greedy: the draw added to the target Q alone, the argmax under the mean, so the
+    target takes the draw of the mean's greedy action (zero-mean noise) rather than the largest
+    of the actions' draws, whose positive mean a one-step bootstrap adds up over 1 / (1 - gamma)
+    steps (DoorKey: docs/design.md)."""
     center_sample: bool = False
     """With target = sample: subtract from every bootstrapped target of a minibatch the
     minibatch's mean optimism (the draws' sum of y - y_mean over the sum of the bootstrap

@@ -362,6 +362,9 @@ AGENTS: tuple[Agent, ...] = (
     # upward bias, compounded by bootstrapping, lifts Q on DoorKey-5x5 to about 15 where no
     # return exceeds 1: benchmarks/value_calibration.py)
     Agent("Farsighter (max by mean)", "farsighter", {"k_target": "max-mean"}),
+    # the target's draw of the action greedy under the mean (zero-mean noise), against the
+    # default's largest of the actions' draws (blr.target sample-greedy)
+    Agent("Farsighter (greedy-action draw)", "farsighter", {"blr.target": "sample-greedy"}),
 )
 COLORS = {a.label: f"C{i}" for i, a in enumerate(AGENTS)}
 _NAMED_ONLY = (
@@ -378,6 +381,7 @@ _NAMED_ONLY = (
     "Farsighter (data weight 1)",
     "Farsighter (fixed width)",
     "Farsighter (max by mean)",
+    "Farsighter (greedy-action draw)",
 )
 DEFAULT_AGENTS = tuple(a.label for a in AGENTS if a.label not in _NAMED_ONLY)
 """The default list: every agent once but those run only when named. "Farsighter (redraw k)" and
