@@ -3,12 +3,13 @@
 from __future__ import annotations
 
 from pathlib import Path
+from typing import Any
 
 import numpy as np
 import pytest
 
 from benchmarks.value_calibration import calibrate, discounted_returns
-from farsighter import load_agent, make_config, train
+from farsighter import load_agent, train
 
 
 def test_discounted_returns_run_backwards_from_the_last_step() -> None:
@@ -17,21 +18,11 @@ def test_discounted_returns_run_backwards_from_the_last_step() -> None:
     assert discounted_returns([2.0], 0.5).tolist() == [2.0]
 
 
-def test_calibrate_compares_q_with_the_return_that_followed(tmp_path: Path) -> None:
-    # CartPole pays 1 a step, so G_0 of an episode of length T is (1 - 0.99^T) / 0.01, and Q - G
-    # is Q read at the same states: both checked against the run's own numbers
-    cfg = make_config(
-        "ddqn",
-        "CartPole-v1",
-        total_steps=600,
-        learning_starts=100,
-        eval_every=0,
-        eval_episodes=1,
-        run_dir=str(tmp_path / "run"),
-        progress=False,
-        torch_threads=1,
-    )
-    train(cfg)
+def test_calibrate_compares_q_with_the_return_that_followed(
+    tmp_path: Path, tiny_config: Any
+) -> None:
+    # CartPole pays 1 a step, so G_0 of an episode of length T is (1 - 0.99^T) / 0.01
+    train(tiny_config("ddqn", tmp_path / "run", total_steps=600, learning_starts=100, eval_every=0))
     row = calibrate(tmp_path / "run", episodes=1, seed=7, max_return=100.0)
     assert row["env"] == "CartPole-v1" and row["episodes"] == 1
     assert row["ended_share"] == 1.0  # an untrained pole falls long before the time limit
