@@ -365,6 +365,13 @@ AGENTS: tuple[Agent, ...] = (
     # the target's draw of the action greedy under the mean (zero-mean noise), against the
     # default's largest of the actions' draws (blr.target sample-greedy)
     Agent("Farsighter (greedy-action draw)", "farsighter", {"blr.target": "sample-greedy"}),
+    # both upward biases of the default's target out: the greedy action's draw and the k-step
+    # target alone (DoorKey-5x5: Q at the start 0.10, where the default's is 14.4)
+    Agent(
+        "Farsighter (greedy-action draw, k-step target)",
+        "farsighter",
+        {"blr.target": "sample-greedy", "k_target": "k"},
+    ),
 )
 COLORS = {a.label: f"C{i}" for i, a in enumerate(AGENTS)}
 _NAMED_ONLY = (
@@ -382,6 +389,7 @@ _NAMED_ONLY = (
     "Farsighter (fixed width)",
     "Farsighter (max by mean)",
     "Farsighter (greedy-action draw)",
+    "Farsighter (greedy-action draw, k-step target)",
 )
 DEFAULT_AGENTS = tuple(a.label for a in AGENTS if a.label not in _NAMED_ONLY)
 """The default list: every agent once but those run only when named. "Farsighter (redraw k)" and
