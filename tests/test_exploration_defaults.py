@@ -140,6 +140,34 @@ def test_target_noise_rows_draw_what_q_noise_draws() -> None:
     assert abs((fast[:, 0] * fast[:, 1]).mean().item()) < 0.05 * fast.var(0).max().item()
 
 
+def test_one_action_noise_is_that_actions_column_of_every_actions_noise() -> None:
+    """q_noise_rows_action (blr.target = sample-greedy's target noise, a product per action
+    present) gives each row the noise q_noise_rows gives its action: the per-action posteriors
+    differ here, so a row given another action's U_a, or a group written to the wrong rows,
+    fails."""
+
+    head = BLRHead(num_actions=3, dim=5, prior_std=1.0, noise_std=0.5, cov_scale=2.5)
+    g = torch.Generator().manual_seed(4)
+    phi = torch.randn(90, 5, generator=g)
+    act = torch.arange(90) % 3
+    head.fit(phi * (1 + act[:, None]), act, torch.randn(90, generator=g))  # unequal per action
+    x = torch.randn(11, 5, generator=g)
+    eps = torch.randn(11, 3, generator=g)
+    every = head.q_noise_rows(x, eps)
+    sd = head.predictive_var(x).sqrt()
+    assert (sd[:, 0] - sd[:, 2]).abs().min() > 1e-3  # the actions' widths differ
+    choice = torch.tensor([2, 0, 1, 1, 2, 0, 0, 2, 1, 2, 2])
+    one = head.q_noise_rows_action(x, choice, eps.gather(1, choice[:, None])[:, 0])
+    torch.testing.assert_close(one, every.gather(1, choice[:, None])[:, 0])
+    # one action for every row, and a single row
+    torch.testing.assert_close(
+        head.q_noise_rows_action(x, torch.ones(11, dtype=torch.long), eps[:, 1]), every[:, 1]
+    )
+    torch.testing.assert_close(
+        head.q_noise_rows_action(x[:1], choice[:1], eps[:1, 2]), every[:1, 2]
+    )
+
+
 def test_sample_target_adds_the_rows_noise(tmp_path: Path) -> None:
     """Eq. 8's target with blr.target = sample is the mean target with q_noise_rows added to
     both Q's of s': with all normals zero it is the mean target; with normals it moves by the

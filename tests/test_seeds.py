@@ -62,7 +62,8 @@ def _files(run: Path) -> dict[str, list[str]]:
             {"preset": "general", "blr__random_features_kind": "fourier", "batch_size": 24},
         ),
         # held draws redrawn on a revisit, two envs a seed, clipping that bites, k = 3, over the
-        # learned features alone, the k-step or one-step target chosen by the posterior mean
+        # learned features alone, the k-step or one-step target chosen by the posterior mean,
+        # the draw of the greedy action alone in the targets (a product per action present)
         (
             "farsighter",
             "farsighter/DeepSea6-v0",
@@ -71,6 +72,7 @@ def _files(run: Path) -> dict[str, list[str]]:
                 "blr__random_features": 0,
                 "k": 3,
                 "k_target": "max-mean",
+                "blr__target": "sample-greedy",
                 "num_envs": 2,
                 "max_grad_norm": 0.5,
                 "blr__redraw": "revisit",

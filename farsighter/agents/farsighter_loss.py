@@ -186,9 +186,17 @@ def eq8_targets(
     q_next_target = phi_next_target @ target_mean_AD.T
     if kind not in SAMPLED_TARGETS:
         return double_q_target(t.returns_B, t.bootstrap_B, q_next_online, q_next_target)
-    noise_BA = head.q_noise_rows(phi_next_target, draws["eps_BA"])
-    chooser_BA = q_next_online if kind == "sample-greedy" else q_next_online + noise_BA
-    y_B = double_q_target(t.returns_B, t.bootstrap_B, chooser_BA, q_next_target + noise_BA)
+    if kind == "sample-greedy":  # the noise of one action a row: a 1/A of every action's
+        a_B1 = q_next_online.argmax(dim=1, keepdim=True)  # double_q_target's argmax
+        noise_B = head.q_noise_rows_action(
+            phi_next_target, a_B1[:, 0], draws["eps_BA"].gather(1, a_B1)[:, 0]
+        )
+        y_B = t.returns_B + t.bootstrap_B * (q_next_target.gather(1, a_B1)[:, 0] + noise_B)
+    else:
+        noise_BA = head.q_noise_rows(phi_next_target, draws["eps_BA"])
+        y_B = double_q_target(
+            t.returns_B, t.bootstrap_B, q_next_online + noise_BA, q_next_target + noise_BA
+        )
     if not centered:
         return y_B
     y_mean_B = double_q_target(t.returns_B, t.bootstrap_B, q_next_online, q_next_target)

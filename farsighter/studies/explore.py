@@ -372,6 +372,13 @@ AGENTS: tuple[Agent, ...] = (
         "farsighter",
         {"blr.target": "sample-greedy", "k_target": "k"},
     ),
+    # no draw chooses: the greedy action's draw, and the k-step or the one-step target by their
+    # means (the optimality-tightening max kept, the larger of two drawn targets' bias out)
+    Agent(
+        "Farsighter (greedy-action draw, max by mean)",
+        "farsighter",
+        {"blr.target": "sample-greedy", "k_target": "max-mean"},
+    ),
 )
 COLORS = {a.label: f"C{i}" for i, a in enumerate(AGENTS)}
 _NAMED_ONLY = (
@@ -390,6 +397,7 @@ _NAMED_ONLY = (
     "Farsighter (max by mean)",
     "Farsighter (greedy-action draw)",
     "Farsighter (greedy-action draw, k-step target)",
+    "Farsighter (greedy-action draw, max by mean)",
 )
 DEFAULT_AGENTS = tuple(a.label for a in AGENTS if a.label not in _NAMED_ONLY)
 """The default list: every agent once but those run only when named. "Farsighter (redraw k)" and
