@@ -4,6 +4,7 @@ propagating targets, the k-step target's max, the general preset, and the chain 
 
 from __future__ import annotations
 
+import dataclasses
 import math
 from pathlib import Path
 
@@ -193,6 +194,42 @@ def test_sample_target_adds_the_rows_noise(tmp_path: Path) -> None:
     shifted = loss.targets(t, {"eps_BA": torch.ones(5, 2)})
     a_up = (agent.torso(t.next_obs_B) @ head.mean_AD.T + sd).argmax(1)
     torch.testing.assert_close(shifted, 1 + 0.5 * (q_t + sd).gather(1, a_up[:, None])[:, 0])
+
+
+@pytest.mark.parametrize("target", ["sample", "sample-greedy"])
+def test_target_noise_scale_multiplies_the_draw_in_the_target(tmp_path: Path, target: str) -> None:
+    """blr.target_noise_scale c: the target the update trains on is the one whose draw is c
+    times the posterior's (normals times c give it), and at c = 0 the mean target; a factor
+    applied twice, to the target Q alone or not at all fails."""
+    scaled = make_agent(tmp_path / "c", **{"blr.target": target, "k": 1})
+    loss = scaled.loss
+    loss.blr = dataclasses.replace(loss.blr, target_noise_scale=0.3)
+    g = torch.Generator().manual_seed(5)
+    n = 64
+    t = farsighter_module.TensorBatch(
+        obs_B=torch.randn(n, 4, generator=g),
+        next_obs_B=torch.randn(n, 4, generator=g),
+        actions_B=torch.zeros(n, dtype=torch.long),
+        returns_B=torch.ones(n),
+        bootstrap_B=torch.full((n,), 0.9),
+    )
+    eps = torch.randn(n, 2, generator=g) * 20
+    y = loss.targets(t, {"eps_BA": eps})
+    plain = dataclasses.replace(loss.blr, target_noise_scale=1.0)
+    loss.blr, scaled_blr = plain, loss.blr
+    torch.testing.assert_close(y, loss.targets(t, {"eps_BA": 0.3 * eps}))
+    assert not torch.allclose(y, loss.targets(t, {"eps_BA": eps}))
+    loss.blr = dataclasses.replace(scaled_blr, target_noise_scale=0.0)
+    mean = farsighter_module.eq8_targets(
+        scaled.head,
+        loss.target_mean_AD,
+        "mean",
+        t,
+        scaled.torso(t.next_obs_B),
+        loss.torso_target(t.next_obs_B),
+        {},
+    )
+    torch.testing.assert_close(loss.targets(t, {"eps_BA": eps}), mean)
 
 
 def test_sample_greedy_target_draws_the_value_of_the_means_greedy_action(tmp_path: Path) -> None:

@@ -57,6 +57,8 @@ def test_family_table() -> None:
     assert (chain.threshold, chain.eval_episodes) == (0.5, 1)
     assert FAMILIES["doorkey"].env_ids == tuple(f"MiniGrid-DoorKey-{n}x{n}-v0" for n in (5, 6, 8))
     assert FAMILIES["doorkey"].budgets == (100_000, 250_000, 1_000_000)
+    assert FAMILIES["empty"].env_ids == tuple(f"MiniGrid-Empty-{n}x{n}-v0" for n in (5, 8, 16))
+    assert FAMILIES["empty"].budgets == (50_000, 100_000, 300_000)
     assert FAMILIES["keycorridor"].env_ids[2] == "MiniGrid-KeyCorridorS3R3-v0"
     assert FAMILIES["keycorridor"].budgets == (100_000, 300_000, 1_000_000)
     assert FAMILIES["multiroom"].env_ids == (
@@ -72,7 +74,7 @@ def test_family_table() -> None:
         -199.0,
         5,
     )
-    for name in ("doorkey", "keycorridor", "multiroom"):
+    for name in ("doorkey", "empty", "keycorridor", "multiroom"):
         assert (FAMILIES[name].threshold, FAMILIES[name].eval_episodes) == (0.5, 10)
     acrobot = FAMILIES["acrobot"]
     assert (acrobot.env_ids, acrobot.budgets, acrobot.threshold, acrobot.goal) == (
@@ -95,7 +97,7 @@ def test_tasks_with_the_steps_cap_and_sizes() -> None:
     capped = dataclasses.replace(QUICK, steps=15_000)
     assert [n for _, n in tasks(capped)] == [10_000, 10_000, 15_000]
     full = tasks(StudyConfig())
-    assert len(full) == 5 + 3 + 3 + 3 + 1 + 1 + 2 + 9 + 4
+    assert len(full) == 5 + 3 + 3 + 3 + 3 + 1 + 1 + 2 + 9 + 4
     assert ("MountainCar-v0", 200_000) in full and ("Acrobot-v1", 100_000) in full
     assert full[-1] == (deep_sea_id(20, stochastic=True), 20 * 3_000)
     # --episodes sets deep sea runs (both families) alone; --steps still caps

@@ -55,11 +55,17 @@ def _files(run: Path) -> dict[str, list[str]]:
         # the defaults: k = 10 with k_target max, the targets' posterior noise, a draw held for
         # k, each seed's own fixed random features beside its learned ones
         ("farsighter", "CartPole-v1", {"preset": "general"}),
-        # random Fourier features in place of the ReLU ones (each seed's cos layer, stacked)
+        # random Fourier features in place of the ReLU ones (each seed's cos layer, stacked),
+        # the targets' draw at half the posterior's width
         (
             "farsighter",
             "farsighter/DeepSea6-v0",
-            {"preset": "general", "blr__random_features_kind": "fourier", "batch_size": 24},
+            {
+                "preset": "general",
+                "blr__random_features_kind": "fourier",
+                "blr__target_noise_scale": 0.5,
+                "batch_size": 24,
+            },
         ),
         # held draws redrawn on a revisit, two envs a seed, clipping that bites, k = 3, over the
         # learned features alone, the k-step or one-step target chosen by the posterior mean,

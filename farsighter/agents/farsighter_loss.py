@@ -90,6 +90,7 @@ class FarsighterLoss:
             phi_next_target,
             draws,
             self.blr.center_sample,
+            self.blr.target_noise_scale,
         )
         if not with_mean:
             return y_B, None
@@ -175,13 +176,14 @@ def eq8_targets(
     phi_next_target: torch.Tensor,
     draws: Tensors,
     centered: bool = False,
+    noise_scale: float = 1.0,
 ) -> torch.Tensor:
     """y of Eq. 8 from the online and target features of s' (``kind``: ``blr.target``): the
     double-Q target under the posterior mean (or the acting draw ``w_online_AD``), with the
     per-row posterior noise of ``eps_BA`` added to both Q's for ``sample`` (the argmax over the
     drawn values), to the target Q alone for ``sample-greedy`` (the draw of the action greedy
     under the mean: zero-mean noise) (``centered``: ``blr.center_sample``, the minibatch's mean
-    optimism taken out)."""
+    optimism taken out; ``noise_scale``: ``blr.target_noise_scale``, a factor on the draw)."""
     q_next_online = phi_next @ draws.get("w_online_AD", head.mean_AD).T
     q_next_target = phi_next_target @ target_mean_AD.T
     if kind not in SAMPLED_TARGETS:
@@ -191,9 +193,13 @@ def eq8_targets(
         noise_B = head.q_noise_rows_action(
             phi_next_target, a_B1[:, 0], draws["eps_BA"].gather(1, a_B1)[:, 0]
         )
+        if noise_scale != 1.0:
+            noise_B.mul_(noise_scale)
         y_B = t.returns_B + t.bootstrap_B * (q_next_target.gather(1, a_B1)[:, 0] + noise_B)
     else:
         noise_BA = head.q_noise_rows(phi_next_target, draws["eps_BA"])
+        if noise_scale != 1.0:
+            noise_BA.mul_(noise_scale)
         y_B = double_q_target(
             t.returns_B, t.bootstrap_B, q_next_online + noise_BA, q_next_target + noise_BA
         )

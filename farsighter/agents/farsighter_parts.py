@@ -78,4 +78,5 @@ class SeedParts:
             phi_next_target,
             draws,
             blr.center_sample,
+            blr.target_noise_scale,
         )

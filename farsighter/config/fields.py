@@ -3,6 +3,7 @@ those into ``--help`` text), one per agent family beside the run's own."""
 
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Annotated, Literal
@@ -61,6 +62,14 @@ class BLRConfig:
     target takes the draw of the mean's greedy action (zero-mean noise) rather than the largest
     of the actions' draws, whose positive mean a one-step bootstrap adds up over 1 / (1 - gamma)
     steps (DoorKey: docs/design.md)."""
+    target_noise_scale: float = 1.0
+    """With target = sample or sample-greedy: a factor on the draw added to the next state's value
+    (1: the posterior's own width). The draw's upward bias (the largest of the actions' draws,
+    the larger of two drawn targets) adds up over the bootstraps to a bonus for every step that
+    does not end the episode, about that bias / (1 - gamma), in proportion to this factor; the
+    rewards do not scale with it. So a factor below 1 weighs what the task pays more against
+    that bonus (a goal that ends the episode: MiniGrid, FrozenLake) while the frontier's wider
+    draws keep their lead over the states the run knows. Our extension."""
     center_sample: bool = False
     """With target = sample: subtract from every bootstrapped target of a minibatch the
     minibatch's mean optimism (the draws' sum of y - y_mean over the sum of the bootstrap
@@ -105,6 +114,11 @@ class BLRConfig:
             (self.cov_scale > 0, f"blr.cov_scale must be > 0 (got {self.cov_scale})"),
             (0 < self.forgetting <= 1, "blr.forgetting must be in (0, 1]"),
             (self.data_weight > 0, f"blr.data_weight must be > 0 (got {self.data_weight})"),
+            (
+                self.target_noise_scale >= 0 and math.isfinite(self.target_noise_scale),
+                f"blr.target_noise_scale must be a finite number >= 0 (got "
+                f"{self.target_noise_scale})",
+            ),
             (self.posterior_every >= 1, "blr.posterior_every must be >= 1"),
             (self.posterior_samples >= 1, "blr.posterior_samples must be >= 1"),
             (self.redraw_every >= 1, "blr.redraw_every must be >= 1"),

@@ -238,6 +238,14 @@ FAMILIES: dict[str, Family] = {
         tuple(f"MiniGrid-DoorKey-{n}x{n}-v0" for n in (5, 6, 8)),
         (100_000, 250_000, 1_000_000),
     ),
+    # the plainest MiniGrid room, no key and no door: the goal in the far corner; a random walk
+    # reaches it at 5 x 5, so a run that never does has stopped exploring
+    "empty": _minigrid(
+        "grid side",
+        (5, 8, 16),
+        tuple(f"MiniGrid-Empty-{n}x{n}-v0" for n in (5, 8, 16)),
+        (50_000, 100_000, 300_000),
+    ),
     "keycorridor": _minigrid(
         "rows R",
         (1, 2, 3),
