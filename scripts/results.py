@@ -291,6 +291,21 @@ ENTRIES = (
         517,
     ),
     Entry(
+        "explore/empty5",
+        "explore --families empty --sizes 5 --seeds 1 2 3 --agents Farsighter DDQN "
+        "'Farsighter (greedy-action draw)' --workers 2",
+        "MiniGrid Empty-5x5, 3 seeds x 50k steps: the defaults' survival bonus against the goal "
+        "that ends the episode (docs/design.md, the plainest MiniGrid room)",
+        862,
+    ),
+    Entry(
+        "explore/empty5-mean-kstep",
+        "explore --families empty --sizes 5 --seeds 1 2 3 --agents "
+        "'Farsighter (mean, k-step target)' --workers 2 --seeds-per-batch 1",
+        "MiniGrid Empty-5x5 with neither upward bias (the mean target and the k-step target)",
+        339,
+    ),
+    Entry(
         "minatar",
         "atari --games minatar --agents DDQN BDQN Farsighter --seeds 1 2 --steps 50000 "
         "--eval-every 10000 --eval-episodes 10",

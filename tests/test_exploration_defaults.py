@@ -674,3 +674,79 @@ def test_minigrid_observations_are_flat_and_scaled() -> None:
     obs, _ = env.reset(seed=0)
     assert obs.shape == (147,) and obs.dtype == np.float32
     assert 0.0 <= obs.min() and obs.max() <= 1.0
+
+
+def test_optimism_until_reward_switches_to_calibrated_targets_at_the_first_reward(
+    tmp_path: Path,
+) -> None:
+    """blr.optimism until-reward: the sampled target with k_target max while the run has seen
+    no positive reward (zero and negative rewards keep it), then the posterior mean's k-step
+    target for good, which a checkpoint carries; the update trains on that target (a switch
+    that never fires, fires on a negative reward or is lost on a reload fails)."""
+    values = {"blr.target": "sample", "k_target": "max", "k": 3, "blr.optimism": "until-reward"}
+    agent = make_agent(tmp_path / "a", **values)
+    obs = np.zeros((1, 4), np.float32)
+
+    def step(reward: float) -> None:
+        action = agent.act(obs, 10)
+        agent.observe(
+            VectorStep(obs, action, np.array([reward]), np.array([False]), np.array([False]), None)
+        )
+
+    for reward in (0.0, -1.0, 0.0):
+        step(reward)
+    assert not agent.loss.calibrated
+    assert (agent.loss.blr.target, agent.loss.k_target) == ("sample", "max")
+    assert agent._draws(4, True).keys() == {"eps_BA", "one_eps_BA"}
+    step(0.5)
+    assert agent.loss.calibrated
+    assert (agent.loss.blr.target, agent.loss.k_target) == ("mean", "k")
+    assert agent._draws(4, True) == {}  # the mean target draws nothing
+    # the target the update trains on: the k-step mean target, one-step inputs ignored
+    n = 8
+    g = torch.Generator().manual_seed(2)
+    inputs = {
+        "obs_B": torch.randn(n, 4, generator=g),
+        "next_obs_B": torch.randn(n, 4, generator=g),
+        "actions_B": torch.zeros(n, dtype=torch.long),
+        "returns_B": torch.ones(n),
+        "bootstrap_B": torch.full((n,), 0.5),
+        "one_next_obs_B": torch.randn(n, 4, generator=g),
+        "one_returns_B": torch.full((n,), 100.0),  # would win any max
+        "one_bootstrap_B": torch.full((n,), 0.9),
+    }
+    t = farsighter_module.TensorBatch.of(inputs)
+    mean_k = farsighter_module.eq8_targets(
+        agent.head,
+        agent.loss.target_mean_AD,
+        "mean",
+        t,
+        agent.torso(t.next_obs_B),
+        agent.loss.torso_target(t.next_obs_B),
+        {},
+    )
+    expected = td_loss(
+        farsighter_module.q_taken(agent.torso(t.obs_B), agent.head.mean_AD, t.actions_B),
+        mean_k,
+        agent.cfg.loss,
+    )
+    torch.testing.assert_close(agent.loss(inputs)["loss"], expected)
+    # a checkpoint carries the switch
+    again = make_agent(tmp_path / "b", **values)
+    assert not again.loss.calibrated
+    again.load_state_dict(agent.state_dict())
+    assert again.loss.calibrated and again.loss.k_target == "k"
+    # the default never switches
+    plain = make_agent(tmp_path / "c", **{**values, "blr.optimism": "always"})
+    for reward in (1.0, 2.0):
+        plain.observe(
+            VectorStep(
+                obs,
+                plain.act(obs, 10),
+                np.array([reward]),
+                np.array([False]),
+                np.array([False]),
+                None,
+            )
+        )
+    assert not plain.loss.calibrated and plain.loss.k_target == "max"

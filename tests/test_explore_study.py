@@ -208,6 +208,7 @@ def test_agents_are_one_config_each_on_the_auto_preset(tmp_path: Path) -> None:
         "Farsighter (greedy-action draw)",
         "Farsighter (greedy-action draw, k-step target)",
         "Farsighter (greedy-action draw, max by mean)",
+        "Farsighter (optimism until reward)",
     ]
     by = {a.label: a for a in AGENTS}
     # the default list trains no config twice, and leaves out the variants run only when named
@@ -228,10 +229,11 @@ def test_agents_are_one_config_each_on_the_auto_preset(tmp_path: Path) -> None:
         "Farsighter (greedy-action draw)",
         "Farsighter (greedy-action draw, k-step target)",
         "Farsighter (greedy-action draw, max by mean)",
+        "Farsighter (optimism until reward)",
     }
     assert not named_only & set(StudyConfig().agents)
     assert "Farsighter (redraw step)" in StudyConfig().agents
-    assert len(StudyConfig().agents) == len(AGENTS) - 16
+    assert len(StudyConfig().agents) == len(AGENTS) - 17
     every = [
         run_config(a, QUICK, 3, tmp_path, (chain_id(10), 10_000))
         for a in AGENTS

@@ -79,7 +79,9 @@ class FarsighterAgent:
         # Eq. 8, with the target features of sampled next states kept until the next copy
         cache = make_target_cache(cfg, device, self.torso.out_dim)
         self.loss = FarsighterLoss(self.torso, self.head, cfg, cache)
-        self.learner = Learner(self.loss, self.torso.parameters(), cfg, device)
+        # blr.optimism until-reward switches the loss's branch mid-run: never captured
+        eager = cfg.blr.optimism != "always"
+        self.learner = Learner(self.loss, self.torso.parameters(), cfg, device, eager=eager)
         self.replay = make_replay(cfg, obs_space, frame_stack, seed=cfg.seed + 1, device=device)
         self.rng = np.random.default_rng(cfg.seed + 2)
         self.gen = torch.Generator(device=device)
@@ -113,6 +115,9 @@ class FarsighterAgent:
 
     def observe(self, step: VectorStep) -> None:
         self.replay.add_step(step)
+        if self.cfg.blr.optimism == "until-reward" and not self.loss.calibrated:
+            if bool(np.any(np.asarray(step.reward_E) > 0)):
+                self.loss.calibrate()
         self.exploration.observe(np.logical_or(step.terminated_E, step.truncated_E))
 
     # ------------------------------------------------------------------ learning
@@ -142,7 +147,7 @@ class FarsighterAgent:
         except ValueError:  # not enough complete k-step windows yet
             return None
         inputs = batch_tensors(batch, self.device).tensors()
-        if self.cfg.k_target != "k" and self.counters.k > 1:
+        if self.loss.k_target != "k" and self.counters.k > 1:
             # The larger of the k-step and the one-step target of the same start (lower-bound
             # Q-learning, Tang 2020): see Config.k_target. Same s and a, so only s', r, gamma.
             one_inputs, one = one_step_inputs(self.replay, batch, self.cfg.gamma, self.device)
@@ -220,6 +225,7 @@ class FarsighterAgent:
         state = save_state(self, self.SAVED, include_replay)
         state["exploration"] = self.exploration.state_dict()
         state["recent_phi"] = self.recent_phi.state_dict()
+        state["calibrated"] = self.loss.calibrated
         cache = self.loss.target.cache  # keyed by replay rows: of no use without them
         state["target_cache"] = None if cache is None or not include_replay else cache.state_dict()
         return state
@@ -227,6 +233,8 @@ class FarsighterAgent:
     def load_state_dict(self, state: dict[str, Any]) -> None:
         load_state(self, self.SAVED, state)
         self.recent_phi.load_state_dict(state["recent_phi"])
+        if state.get("calibrated", False) and not self.loss.calibrated:
+            self.loss.calibrate()
         # a checkpoint from before the exploration object holds its pieces under our own keys
         self.exploration.load_state_dict(state.get("exploration", state))
         # the target cache (cleared by the target's load) is kept when the checkpoint has it

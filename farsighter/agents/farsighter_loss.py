@@ -23,6 +23,7 @@ and the target features of s' may come from the target cache.
 from __future__ import annotations
 
 import copy
+import dataclasses
 from collections.abc import Callable
 
 import numpy as np
@@ -51,6 +52,14 @@ class FarsighterLoss:
         self.target = CachedTarget(self.torso_target, cache)
         self.target_mean_AD = head.mean_AD.clone()
         self.kind, self.blr, self.k_target = cfg.loss, cfg.blr, cfg.k_target
+        self.calibrated = False  # blr.optimism until-reward, after the first positive reward
+
+    def calibrate(self) -> None:
+        """``blr.optimism = until-reward``'s switch: from now on the posterior mean and the
+        k-step target alone (no draw, no max with the one-step target)."""
+        self.calibrated = True
+        self.blr = dataclasses.replace(self.blr, target="mean")
+        self.k_target = "k"
 
     def copy_target(self) -> None:
         """Algorithm 1 line 8: target torso and target mean <- online ones (in place)."""
@@ -112,7 +121,7 @@ class FarsighterLoss:
         features and regression targets the posterior's statistics add."""
         t = TensorBatch.of(inputs)
         cached = inputs.get("phi_next_target_BD")
-        if "one_next_obs_B" not in inputs:
+        if "one_next_obs_B" not in inputs or self.k_target == "k":
             y_B = self.targets(t, inputs, cached)
         elif self.k_target == "max-mean":  # the one larger under the mean, with its draw
             y_B, mean_B = self.target_and_mean(t, inputs, cached)

@@ -61,6 +61,11 @@ def supports(cfg: Config, obs_space: gym.Space | None, device: torch.device) -> 
     """Why ``cfg`` cannot train as a seed batch here ('' when it can)."""
     if cfg.adaptive_k.enabled:
         return "adaptive k trains its seeds one at a time (each seed's k moves on its own)"
+    if cfg.blr.optimism != "always":
+        return (
+            "blr.optimism until-reward trains its seeds one at a time (each seed switches on "
+            "its own)"
+        )
     return stack_refusal(cfg, obs_space)
 
 

@@ -62,6 +62,15 @@ class BLRConfig:
     target takes the draw of the mean's greedy action (zero-mean noise) rather than the largest
     of the actions' draws, whose positive mean a one-step bootstrap adds up over 1 / (1 - gamma)
     steps (DoorKey: docs/design.md)."""
+    optimism: Literal["always", "until-reward"] = "always"
+    """always: the targets' optimism (``target`` and ``Config.k_target`` as set) for the whole
+    run. until-reward: as set until the run's first positive reward, then calibrated targets
+    for good, the posterior mean and the k-step target alone (``target = mean``, ``k_target =
+    k``): the upward bias that carries a lock that pays only at its end (the chain, deep sea)
+    is a bonus for not ending the episode, which on a task whose reward ends it (a MiniGrid
+    goal, FrozenLake) makes reaching the reward the worst action (docs/design.md, the
+    plainest MiniGrid room). The switch is part of the checkpoint; a run with it trains its
+    seeds one at a time and its update eagerly (no CUDA graph, no compile). Our extension."""
     target_noise_scale: float = 1.0
     """With target = sample or sample-greedy: a factor on the draw added to the next state's value
     (1: the posterior's own width). The draw's upward bias (the largest of the actions' draws,

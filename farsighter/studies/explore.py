@@ -387,6 +387,10 @@ AGENTS: tuple[Agent, ...] = (
         "farsighter",
         {"blr.target": "sample-greedy", "k_target": "max-mean"},
     ),
+    # the default's optimism until the run's first positive reward, then the posterior mean's
+    # k-step target (blr.optimism until-reward): the bias for the locks that pay only at their
+    # end, none once the task has paid (MiniGrid Empty-5x5 and DoorKey-5x5: docs/design.md)
+    Agent("Farsighter (optimism until reward)", "farsighter", {"blr.optimism": "until-reward"}),
 )
 COLORS = {a.label: f"C{i}" for i, a in enumerate(AGENTS)}
 _NAMED_ONLY = (
@@ -406,6 +410,7 @@ _NAMED_ONLY = (
     "Farsighter (greedy-action draw)",
     "Farsighter (greedy-action draw, k-step target)",
     "Farsighter (greedy-action draw, max by mean)",
+    "Farsighter (optimism until reward)",
 )
 DEFAULT_AGENTS = tuple(a.label for a in AGENTS if a.label not in _NAMED_ONLY)
 """The default list: every agent once but those run only when named. "Farsighter (redraw k)" and
