@@ -306,6 +306,13 @@ ENTRIES = (
         339,
     ),
     Entry(
+        "explore/doorkey5-mean-kstep",
+        "explore --families doorkey --sizes 5 --seeds 1 2 3 --agents "
+        "'Farsighter (mean, k-step target)' --workers 2 --seeds-per-batch 1",
+        "MiniGrid DoorKey-5x5, 3 seeds x 100k steps, with neither upward bias (the defaults: 0/3)",
+        706,
+    ),
+    Entry(
         "minatar",
         "atari --games minatar --agents DDQN BDQN Farsighter --seeds 1 2 --steps 50000 "
         "--eval-every 10000 --eval-episodes 10",

@@ -35,7 +35,15 @@ def test_summarise_counts_runs_cells_and_goals() -> None:
 def test_record_sees_every_training_step(tmp_path: Path) -> None:
     run = tmp_path / "run"
     args = ["--algo", "ddqn", "--env", "MiniGrid-Empty-5x5-v0", "--total-steps", "300"]
-    args += ["--eval-every", "100000", "--no-progress", "--torch-threads", "1", "--run-dir", str(run)]
+    args += [
+        "--eval-every",
+        "100000",
+        "--no-progress",
+        "--torch-threads",
+        "1",
+        "--run-dir",
+        str(run),
+    ]
     args += ["--learning-starts", "100", "--hidden-sizes", "16", "16"]
     steps = record(args)
     # the 300 training steps, then the final evaluation's (10 episodes, each its own reset)
