@@ -313,6 +313,15 @@ ENTRIES = (
         706,
     ),
     Entry(
+        "explore/until-reward",
+        "explore --families chain deepsea empty doorkey --sizes 30 20 5 --seeds 1 2 3 4 5 "
+        "--agents 'Farsighter (optimism until reward)' --workers 2",
+        "blr.optimism until-reward on the chain L = 30, deep sea N = 20, Empty-5x5 and "
+        "DoorKey-5x5 (made as four calls, one a task, the MiniGrid ones with 3 seeds; this "
+        "one call also runs the chain at 5 and 20, deep sea at 30 and MiniGrid seeds 4 and 5)",
+        1814,
+    ),
+    Entry(
         "minatar",
         "atari --games minatar --agents DDQN BDQN Farsighter --seeds 1 2 --steps 50000 "
         "--eval-every 10000 --eval-episodes 10",
