@@ -225,7 +225,8 @@ class FarsighterAgent:
         state = save_state(self, self.SAVED, include_replay)
         state["exploration"] = self.exploration.state_dict()
         state["recent_phi"] = self.recent_phi.state_dict()
-        state["calibrated"] = self.loss.calibrated
+        if self.cfg.blr.optimism != "always":  # the switch; a default run's keys as before
+            state["calibrated"] = self.loss.calibrated
         cache = self.loss.target.cache  # keyed by replay rows: of no use without them
         state["target_cache"] = None if cache is None or not include_replay else cache.state_dict()
         return state
