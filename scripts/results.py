@@ -306,6 +306,13 @@ ENTRIES = (
         339,
     ),
     Entry(
+        "explore/empty8",
+        "explore --families empty --sizes 8 --seeds 1 --agents Farsighter "
+        "'Farsighter (mean, k-step target)' --workers 2",
+        "MiniGrid Empty-8x8, one seed x 100k steps: the defaults against the mean and k-step pair",
+        403,
+    ),
+    Entry(
         "explore/doorkey5-mean-kstep",
         "explore --families doorkey --sizes 5 --seeds 1 2 3 --agents "
         "'Farsighter (mean, k-step target)' --workers 2 --seeds-per-batch 1",
