@@ -123,23 +123,18 @@ class FarsighterLoss:
         cached = inputs.get("phi_next_target_BD")
         if "one_next_obs_B" not in inputs or self.k_target == "k":
             y_B = self.targets(t, inputs, cached)
-        elif self.k_target == "max-mean":  # the one larger under the mean, with its draw
-            y_B, mean_B = self.target_and_mean(t, inputs, cached)
-            one_B, one_mean_B = self.target_and_mean(
+        else:  # k_target max or max-mean: same s and a, so only s', r, gamma
+            one = (
                 one_step_batch(t, inputs),
                 one_step_draws(inputs),
                 inputs.get("one_phi_next_target_BD"),
             )
-            y_B = k_or_one_step(y_B, one_B, mean_B, one_mean_B)
-        else:  # k_target = max: same s and a, so only s', r, gamma
-            y_B = torch.maximum(
-                self.targets(t, inputs, cached),
-                self.targets(
-                    one_step_batch(t, inputs),
-                    one_step_draws(inputs),
-                    inputs.get("one_phi_next_target_BD"),
-                ),
-            )
+            if self.k_target == "max":
+                y_B = k_or_one_step(self.targets(t, inputs, cached), self.targets(*one))
+            else:  # max-mean: the one larger under the mean, with its draw
+                y_B, mean_B = self.target_and_mean(t, inputs, cached)
+                one_B, one_mean_B = self.target_and_mean(*one)
+                y_B = k_or_one_step(y_B, one_B, mean_B, one_mean_B)
         phi_BD = self.torso(t.obs_B)
         out = {"loss": td_loss(q_taken(phi_BD, self.head.mean_AD, t.actions_B), y_B, self.kind)}
         if self.blr.mode == "incremental":  # the statistics are added outside the step

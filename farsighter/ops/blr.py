@@ -485,10 +485,11 @@ class BLRHead:
         costs B A d^2, so with 7 actions (MiniGrid) a seventh of it. On an accelerator every
         action's product is formed and the row's one gathered, which keeps the step free of
         data-dependent shapes (a captured graph can run it)."""
-        action_B = action_B.to(device=self.device, dtype=torch.long)
         if self.device.type != "cpu":
-            sd_B = self.q_noise_rows(phi_BD, torch.ones_like(phi_BD[:, : self.num_actions]))
-            sd_B = sd_B.gather(1, action_B[:, None])[:, 0]
+            ones_BA = torch.ones(phi_BD.shape[0], self.num_actions, device=self.device)
+            sd_B = self.q_noise_rows(phi_BD, ones_BA).gather(
+                1, action_B.to(device=self.device, dtype=torch.long)[:, None]
+            )[:, 0]
             return sd_B.mul_(eps_B)
         out_B = torch.empty(phi_BD.shape[0], dtype=torch.float32, device=self.device)
         for idx_K, phiu_KD in self._phi_u_by_action(phi_BD, action_B):
