@@ -632,9 +632,11 @@ def test_auto_gives_discrete_tasks_the_general_preset_and_keeps_table_1_selectab
 
 def test_k_target_max_is_refused_where_it_does_nothing() -> None:
     with pytest.raises(
-        ConfigError, match="k_target max and max-mean are only supported by --algo bdqn and"
+        ConfigError, match="k_target max, max-mean and cut are only supported by --algo bdqn"
     ):
         validate(make_config("kddqn", "CartPole-v1", k_target="max"))
+    with pytest.raises(ConfigError, match="max-mean and cut are only supported"):
+        validate(make_config("ddqn", "CartPole-v1", k_target="cut"))
 
 
 # ------------------------------------------------------------------ the chain
@@ -750,3 +752,65 @@ def test_optimism_until_reward_switches_to_calibrated_targets_at_the_first_rewar
             )
         )
     assert not plain.loss.calibrated and plain.loss.k_target == "max"
+
+
+def test_cut_records_where_the_draw_chose_otherwise_than_the_mean(tmp_path: Path) -> None:
+    """k_target cut: the replay flags exactly the training actions that differ from the
+    posterior mean's greedy action (every uniform action before learning_starts), and cuts its
+    windows there; evaluation actions record nothing. A seed batch refuses it."""
+    from farsighter.agents.farsighter_seeds import supports
+    from farsighter.replay.buffer import EXPLORATORY
+
+    agent = make_agent(
+        tmp_path / "a", **{"k_target": "cut", "k": 3, "learning_starts": 5, "blr.redraw": "step"}
+    )
+    assert agent.replay.cut_exploratory
+    # a posterior wide enough that draws often disagree with the mean
+    agent.head.mean_AD.normal_(std=1e-3, generator=torch.Generator().manual_seed(0))
+    rng = np.random.default_rng(0)
+    expected = []
+    for t in range(60):
+        obs = rng.normal(size=(1, 4)).astype(np.float32)
+        action = agent.act(obs, t)
+        with torch.no_grad():
+            greedy = int((agent.torso(torch.from_numpy(obs)) @ agent.head.mean_AD.T).argmax())
+        expected.append(t < 5 or int(action[0]) != greedy)
+        agent.act(obs, t, explore=False)  # an evaluation between steps changes nothing
+        agent.observe(
+            VectorStep(obs, action, np.zeros(1), np.array([False]), np.array([False]), None)
+        )
+    flagged = ((agent.replay.flags[0, :60] & EXPLORATORY) != 0).tolist()
+    assert flagged == expected
+    assert 5 < sum(expected[5:]) < 50  # both kinds occur after learning starts
+    assert "k_target cut" in supports(agent.cfg, None, torch.device("cpu"))
+
+
+def test_until_reward_then_cut_switches_the_replay_to_cut_windows(tmp_path: Path) -> None:
+    """blr.calibrated_k_target cut: before the first positive reward the run keeps k_target max
+    on uncut windows while it records its exploratory actions; at the switch the loss's target
+    becomes the mean's cut target and the replay cuts its windows, which a reload keeps."""
+    values = {
+        "blr.target": "sample",
+        "k_target": "max",
+        "k": 3,
+        "blr.optimism": "until-reward",
+        "blr.calibrated_k_target": "cut",
+    }
+    agent = make_agent(tmp_path / "a", **values)
+    assert agent.cut and not agent.replay.cut_exploratory
+    obs = np.zeros((1, 4), np.float32)
+    for reward in (0.0, -1.0, 1.0):
+        action = agent.act(obs, 10)
+        agent.observe(
+            VectorStep(obs, action, np.array([reward]), np.array([False]), np.array([False]), None)
+        )
+        if reward <= 0:
+            assert agent.loss.k_target == "max" and not agent.replay.cut_exploratory
+    assert (agent.loss.blr.target, agent.loss.k_target) == ("mean", "cut")
+    assert agent.replay.cut_exploratory
+    again = make_agent(tmp_path / "b", **values)
+    again.load_state_dict(agent.state_dict())
+    assert again.loss.k_target == "cut" and again.replay.cut_exploratory
+    # the plain switch neither records nor cuts
+    plain = make_agent(tmp_path / "c", **{**values, "blr.calibrated_k_target": "k"})
+    assert not plain.cut and not plain.replay.cut_exploratory

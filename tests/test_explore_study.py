@@ -233,7 +233,7 @@ def test_agents_are_one_config_each_on_the_auto_preset(tmp_path: Path) -> None:
     }
     assert not named_only & set(StudyConfig().agents)
     assert "Farsighter (redraw step)" in StudyConfig().agents
-    assert len(StudyConfig().agents) == len(AGENTS) - 17
+    assert len(StudyConfig().agents) == len(AGENTS) - 21
     every = [
         run_config(a, QUICK, 3, tmp_path, (chain_id(10), 10_000))
         for a in AGENTS

@@ -289,3 +289,39 @@ def test_one_stream_fast_add_writes_the_rows_of_the_array_path(stack: int) -> No
     a, b = fast.sample(32, k=3, gamma=G), ref.sample(32, k=3, gamma=G)
     assert np.array_equal(a.obs, b.obs) and np.array_equal(a.returns, b.returns)
     assert np.array_equal(a.next_obs, b.next_obs) and np.array_equal(a.bootstrap, b.bootstrap)
+
+
+def test_cut_replay_bootstraps_from_the_state_of_the_first_exploratory_action() -> None:
+    """A replay that cuts (k_target cut) forms the window up to the first exploratory action
+    after the start and bootstraps from the observation it was taken at; the same rows without
+    cutting form the full window. The scalar and the array add store the same flags."""
+    from farsighter.replay.buffer import EXPLORATORY
+
+    k, gamma = 4, 0.9
+    for envs in (1, 2):
+        cutting = ReplayBuffer(64, (1,), np.float32, num_envs=envs, cut_exploratory=True)
+        plain = ReplayBuffer(64, (1,), np.float32, num_envs=envs)
+        assert cutting.scalar_add == (envs == 1)
+        explored = [False, False, False, True, False, False, False, False]
+        for t, flag in enumerate(explored):
+            for rb in (cutting, plain):
+                rb.add(
+                    np.full((envs, 1), t, np.float32),
+                    np.zeros(envs, np.int32),
+                    np.ones(envs),
+                    np.zeros(envs, bool),
+                    np.zeros(envs, bool),
+                    None,
+                    np.full(envs, flag),
+                )
+        assert ((cutting.flags[0, :8] & EXPLORATORY) != 0).tolist() == explored
+        start = np.array([1, 2, 3])
+        e = np.zeros(3, np.int64)
+        batch = cutting.gather(e, start, k, gamma)
+        # from row 1 the action at row 3 is exploratory: rows 1, 2 summed, bootstrap from s_3
+        assert batch.steps.tolist() == [2, 1, 4]  # row 3's own flag does not cut its window
+        assert batch.next_obs[:, 0].tolist() == [3.0, 3.0, 7.0]
+        np.testing.assert_allclose(batch.returns, [1 + gamma, 1, 1 + gamma + gamma**2 + gamma**3])
+        np.testing.assert_allclose(batch.bootstrap, [gamma**2, gamma, gamma**4], rtol=1e-6)
+        full = plain.gather(e, start, k, gamma)
+        assert full.steps.tolist() == [4, 4, 4]

@@ -110,3 +110,33 @@ def test_centered_optimism_sums_to_zero_and_leaves_ends_alone() -> None:
     assert abs(float((out - y_mean).sum())) < 1e-6 and out[2] == 3.0
     none = torch.zeros(4)  # nothing bootstraps: nothing to centre
     torch.testing.assert_close(centered_optimism(y_mean + bonus, y_mean, none), y_mean + bonus)
+
+
+def test_cut_windows_stop_before_the_first_exploratory_step() -> None:
+    """k_target cut: against a step-by-step reading, the window stops before the first step
+    j >= 1 whose action was exploratory and bootstraps from s_{t+j} with gamma^j; the first
+    step's own flag never cuts; an episode end before the cut still ends the window (a
+    terminal one with no bootstrap). Without flags the windows are the plain ones."""
+    rng = np.random.default_rng(1)
+    for k in range(1, 7):
+        r = rng.normal(size=(400, k))
+        term = rng.random((400, k)) < 0.1
+        trunc = rng.random((400, k)) < 0.1
+        cut = rng.random((400, k)) < 0.3
+        ret, n, boot = nstep_returns(r, term, trunc, G, cut)
+        for b in range(400):
+            total, steps = 0.0, 0
+            for j in range(k):
+                if j >= 1 and cut[b, j]:
+                    break
+                total += G**j * r[b, j]
+                steps += 1
+                if term[b, j] or trunc[b, j]:
+                    break
+            assert n[b] == steps
+            assert np.isclose(ret[b], total, rtol=1e-6, atol=1e-6)
+            assert boot[b] == np.float32(0.0 if term[b, steps - 1] else G**steps)
+        plain = nstep_returns(r, term, trunc, G)
+        none = nstep_returns(r, term, trunc, G, np.zeros_like(cut))
+        for a, c in zip(plain, none, strict=True):
+            assert np.array_equal(a, c)

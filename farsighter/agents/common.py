@@ -64,6 +64,7 @@ def make_replay(
         action_shape=action_shape,
         action_dtype=action_dtype,
         seed=seed,
+        cut_exploratory=cfg.k_target == "cut",  # and from blr.optimism's switch on
         device=device if uses_gpu_replay(cfg, device, row_bytes(obs_space, frame_stack)) else None,
     )
 

@@ -41,7 +41,12 @@ from farsighter.agents.common import (
     updates_owed,
 )
 from farsighter.agents.cuda_graph import Tensors
-from farsighter.agents.farsighter_loss import FarsighterLoss, one_step_inputs
+from farsighter.agents.farsighter_loss import (
+    FarsighterLoss,
+    one_step_inputs,
+    records_exploratory,
+    uses_one_step,
+)
 from farsighter.agents.farsighter_posterior import (
     RECENT_FEATURES,
     FarsighterCounters,
@@ -92,11 +97,16 @@ class FarsighterAgent:
         self.recent_phi = RecentRows(RECENT_FEATURES)
         # Eq. 7: each environment's weight draw and when it is replaced (blr.redraw).
         self.exploration = ThompsonExploration(cfg, self.head, self.counters)
+        # k_target cut: whether each environment's latest training action was exploratory
+        self.cut = records_exploratory(cfg)
+        self.exploratory_E: np.ndarray | None = None
 
     # ------------------------------------------------------------------ acting
     def act(self, obs_E: np.ndarray, global_step: int, explore: bool = True) -> np.ndarray:
         n = obs_E.shape[0]
         if explore and global_step < self.cfg.learning_starts:
+            if self.cut:  # uniform actions are all exploratory
+                self.exploratory_E = np.ones(n, dtype=bool)
             return np.asarray(self.rng.integers(0, self.num_actions, size=n))
         with torch.no_grad():
             phi_ED = self.torso(obs_tensor(obs_E, self.device))
@@ -104,7 +114,11 @@ class FarsighterAgent:
                 q_EA = self.exploration.q(phi_ED, obs_E, self.gen)
             else:  # evaluation: greedy under the posterior mean
                 q_EA = phi_ED @ self.head.mean_AD.T
-        return q_EA.argmax(dim=1).cpu().numpy()
+            actions_E = q_EA.argmax(dim=1)
+            if explore and self.cut:  # the draw chose otherwise than the mean would
+                greedy_E = (phi_ED @ self.head.mean_AD.T).argmax(dim=1)
+                self.exploratory_E = (actions_E != greedy_E).cpu().numpy()
+        return actions_E.cpu().numpy()
 
     @torch.no_grad()
     def q_estimate(self, obs_B: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
@@ -114,11 +128,17 @@ class FarsighterAgent:
         return mean_BA.cpu().numpy(), self.head.predictive_var(phi_BD).cpu().numpy()
 
     def observe(self, step: VectorStep) -> None:
-        self.replay.add_step(step)
+        self.replay.add_step(step, self.exploratory_E if self.cut else None)
         if self.cfg.blr.optimism == "until-reward" and not self.loss.calibrated:
             if bool(np.any(np.asarray(step.reward_E) > 0)):
-                self.loss.calibrate()
+                self.calibrate()
         self.exploration.observe(np.logical_or(step.terminated_E, step.truncated_E))
+
+    def calibrate(self) -> None:
+        """``blr.optimism = until-reward``'s switch (:meth:`FarsighterLoss.calibrate`); the
+        replay cuts its windows from now on where the calibrated target is cut."""
+        self.loss.calibrate()
+        self.replay.cut_exploratory = self.loss.k_target == "cut"
 
     # ------------------------------------------------------------------ learning
     def learn(self, global_step: int) -> dict[str, torch.Tensor]:
@@ -147,7 +167,7 @@ class FarsighterAgent:
         except ValueError:  # not enough complete k-step windows yet
             return None
         inputs = batch_tensors(batch, self.device).tensors()
-        if self.loss.k_target != "k" and self.counters.k > 1:
+        if uses_one_step(self.loss.k_target) and self.counters.k > 1:
             # The larger of the k-step and the one-step target of the same start (lower-bound
             # Q-learning, Tang 2020): see Config.k_target. Same s and a, so only s', r, gamma.
             one_inputs, one = one_step_inputs(self.replay, batch, self.cfg.gamma, self.device)
@@ -235,7 +255,7 @@ class FarsighterAgent:
         load_state(self, self.SAVED, state)
         self.recent_phi.load_state_dict(state["recent_phi"])
         if state.get("calibrated", False) and not self.loss.calibrated:
-            self.loss.calibrate()
+            self.calibrate()
         # a checkpoint from before the exploration object holds its pieces under our own keys
         self.exploration.load_state_dict(state.get("exploration", state))
         # the target cache (cleared by the target's load) is kept when the checkpoint has it

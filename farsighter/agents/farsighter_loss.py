@@ -56,10 +56,12 @@ class FarsighterLoss:
 
     def calibrate(self) -> None:
         """``blr.optimism = until-reward``'s switch: from now on the posterior mean and the
-        k-step target alone (no draw, no max with the one-step target)."""
+        k-step target alone (no draw, no max with the one-step target; cut at exploratory
+        actions where ``k_target = cut``)."""
         self.calibrated = True
         self.blr = dataclasses.replace(self.blr, target="mean")
-        self.k_target = "k"
+        cut = self.k_target == "cut" or self.blr.calibrated_k_target == "cut"
+        self.k_target = "cut" if cut else "k"
 
     def copy_target(self) -> None:
         """Algorithm 1 line 8: target torso and target mean <- online ones (in place)."""
@@ -121,7 +123,7 @@ class FarsighterLoss:
         features and regression targets the posterior's statistics add."""
         t = TensorBatch.of(inputs)
         cached = inputs.get("phi_next_target_BD")
-        if "one_next_obs_B" not in inputs or self.k_target == "k":
+        if "one_next_obs_B" not in inputs or not uses_one_step(self.k_target):
             y_B = self.targets(t, inputs, cached)
         else:  # k_target max or max-mean: same s and a, so only s', r, gamma
             one = (
@@ -166,6 +168,21 @@ class FarsighterLoss:
 
 # The math of the loss on given features, shared with the seed-batched agent
 # (farsighter.agents.farsighter_seeds), which computes the features of every seed at once.
+
+
+def records_exploratory(cfg: Config) -> bool:
+    """Whether a run records which of its actions were exploratory: it cuts k-step windows
+    before them (``k_target = cut``) now or after ``blr.optimism``'s switch."""
+    return cfg.k_target == "cut" or (
+        cfg.blr.optimism == "until-reward" and cfg.blr.calibrated_k_target == "cut"
+    )
+
+
+def uses_one_step(k_target: str) -> bool:
+    """Whether ``Config.k_target`` compares the k-step target with the one-step target of the
+    same start (max, max-mean), which needs the one-step windows."""
+    return k_target in ("max", "max-mean")
+
 
 SAMPLED_TARGETS = ("sample", "sample-greedy")
 """The ``blr.target`` values whose next-state value carries a posterior draw per row."""

@@ -37,6 +37,7 @@ from farsighter.agents.farsighter_loss import (
     one_step_draws,
     one_step_inputs,
     q_taken,
+    uses_one_step,
 )
 from farsighter.agents.farsighter_parts import SeedParts
 from farsighter.agents.farsighter_posterior import (
@@ -61,6 +62,11 @@ def supports(cfg: Config, obs_space: gym.Space | None, device: torch.device) -> 
     """Why ``cfg`` cannot train as a seed batch here ('' when it can)."""
     if cfg.adaptive_k.enabled:
         return "adaptive k trains its seeds one at a time (each seed's k moves on its own)"
+    if cfg.k_target == "cut":
+        return (
+            "k_target cut trains its seeds one at a time (each seed's actions are cut where its "
+            "own mean would have chosen otherwise)"
+        )
     if cfg.blr.optimism != "always":
         return (
             "blr.optimism until-reward trains its seeds one at a time (each seed switches on "
@@ -163,7 +169,7 @@ class SeedBatchFarsighter:
             return None
         t = batch_tensors(batch, self.device)
         inputs: Tensors = t.tensors()
-        one_step = cfg.k_target != "k" and k > 1
+        one_step = uses_one_step(cfg.k_target) and k > 1
         ends = {"": batch.index + batch.steps}  # the logical rows of s', for the target caches
         if one_step:  # the larger of the k-step and the one-step target (FarsighterAgent.update)
             one_inputs, one = one_step_inputs(self.replay, batch, cfg.gamma, self.device)

@@ -57,7 +57,7 @@ def _algorithm_checks(cfg: Config, spec: algorithms.Algorithm) -> list[tuple[boo
         ),
         (
             cfg.k_target == "k" or spec.agent == "farsighter",
-            "k_target max and max-mean are only supported by --algo "
+            "k_target max, max-mean and cut are only supported by --algo "
             + " and ".join(a.name for a in algorithms.TABLE if a.agent == "farsighter"),
         ),
         (

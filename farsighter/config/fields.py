@@ -71,6 +71,13 @@ class BLRConfig:
     goal, FrozenLake) makes reaching the reward the worst action (docs/design.md, the
     plainest MiniGrid room). The switch is part of the checkpoint; a run with it trains its
     seeds one at a time and its update eagerly (no CUDA graph, no compile). Our extension."""
+    calibrated_k_target: Literal["k", "cut"] = "k"
+    """With ``optimism = until-reward`` (or ``Config.k_target = cut``): the k-step target after
+    the switch. k: the plain k-step return, which follows the behaviour, so a lock whose path
+    the draws leave is forgotten once its target is no longer lifted (the chain L = 30: solved
+    5/5, held 1/5, docs/results/explore/until-reward). cut: the return stopped before the first
+    exploratory action (``Config.k_target = cut``; the run records which actions were from its
+    start). Our extension."""
     target_noise_scale: float = 1.0
     """With target = sample or sample-greedy: a factor on the draw added to the next state's value
     (1: the posterior's own width). The draw's upward bias (the largest of the actions' draws,
@@ -548,7 +555,7 @@ class Config:
     """Discount factor. Table 1: 0.99."""
     k: int = 1
     """Steps per return: 1 is one-step TD; k > 1 uses k-step returns with gamma^k bootstraps."""
-    k_target: Literal["k", "max", "max-mean"] = "k"
+    k_target: Literal["k", "max", "max-mean", "cut"] = "k"
     """k: the k-step target (section 4.4). max (bdqn, farsighter): the larger of the k-step and
     the one-step target of each sampled start. A k-step return follows the behaviour for k steps,
     so an exploratory episode that ended early makes it pessimistic and stops optimism from
@@ -557,8 +564,15 @@ class Config:
     k steps back at once (lower-bound Q-learning, Tang 2020). Biased upwards where rewards or
     transitions are noisy; one more forward pass per update. max-mean: the one of the two whose
     value under the posterior mean is larger, with its draw (``blr.target sample``'s noise does
-    not choose, so the max of two draws adds no optimism of its own). Our extension, not the
-    paper's."""
+    not choose, so the max of two draws adds no optimism of its own). cut (farsighter): the
+    k-step return stopped before the first action the behaviour took that the posterior mean's
+    greedy policy would not have (recorded when acting; a Thompson draw's choice that differs
+    from the mean's, and every uniform action before ``learning_starts``), bootstrapping from
+    the state where it was taken: Watkins's Q(lambda) cut at k steps. Like max it keeps an
+    exploratory detour from making the target pessimistic, without the max's upward bias (the
+    larger of two noisy estimates), which adds up over 1 / (1 - gamma) bootstraps into a bonus
+    for not ending the episode (docs/design.md, "The plainest MiniGrid room"); no extra forward
+    pass. Our extension, not the paper's."""
     stride: bool = False
     """Algorithm 1 literally: one k-step tuple per k steps instead of one starting at every step."""
     batch_size: int = 32

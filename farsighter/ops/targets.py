@@ -13,6 +13,7 @@ def nstep_returns(
     terminated_BK: np.ndarray,
     truncated_BK: np.ndarray,
     gamma: float,
+    cut_BK: np.ndarray | None = None,
 ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """k-step discounted returns over windows of one-step transitions.
 
@@ -22,6 +23,13 @@ def nstep_returns(
     transitions actually summed (n <= k) and ``bootstrap`` the factor of the bootstrap value
     Q(s_{t+n}): gamma^n, or 0 when the episode terminated inside the window (a terminal state gets
     no bootstrap; a time-limit truncation bootstraps from the last state with gamma^n).
+
+    ``cut_BK`` (``Config.k_target = cut``): where the step's action was exploratory (not the
+    greedy action of the policy being learned). The window then stops before the first such
+    step j >= 1 and bootstraps from s_{t+j} with gamma^j: the return follows the greedy policy
+    as far as the behaviour did, never a choice it would not make (Watkins's Q(lambda) cut,
+    Sutton and Barto 2018 section 12.10). The first step's own action is the one Q(s_t, a_t)
+    values, so it never cuts.
     """
     b, k = rewards_BK.shape
     if k == 1:  # one step: the reward itself, bootstrapped unless it terminated
@@ -31,7 +39,10 @@ def nstep_returns(
             np.ones(b, dtype=np.int64),
             np.where(terminal_B, 0.0, gamma).astype(np.float32),
         )
-    steps_B = window_steps(np.logical_or(terminated_BK, truncated_BK))
+    ends_BK = np.logical_or(terminated_BK, truncated_BK)
+    if cut_BK is not None:  # an exploratory step j ends the window after step j - 1
+        ends_BK[:, :-1] |= np.asarray(cut_BK, dtype=bool)[:, 1:]
+    steps_B = window_steps(ends_BK)
     # alive[j]: no episode end among steps 0..j-1, i.e. step j is still part of the window.
     alive_BK = np.arange(k) < steps_B[:, None]
     returns_B = (rewards_BK.astype(np.float64) * _discounts(gamma, k) * alive_BK).sum(axis=1)

@@ -44,6 +44,8 @@ from farsighter.ops.targets import nstep_returns, window_steps
 TERMINATED = np.uint8(1)
 TRUNCATED = np.uint8(2)
 FINAL = np.uint8(4)
+EXPLORATORY = np.uint8(8)
+"""The row's action was exploratory (``Config.k_target = cut`` stops k-step windows before it)."""
 MIRROR_CHUNK = 65_536  # rows per copy when a loaded replay fills its device mirror
 SLOT_ARRAYS = ("frames", "actions", "rewards", "flags", "t_ep")
 """The arrays with a row per stream and slot."""
@@ -125,6 +127,7 @@ class ReplayBuffer:
         action_dtype: Any = np.int32,
         seed: int = 0,
         device: torch.device | str | None = None,
+        cut_exploratory: bool = False,
     ) -> None:
         if capacity < 1:
             raise ConfigError(f"replay capacity must be >= 1 (got {capacity})")
@@ -161,6 +164,8 @@ class ReplayBuffer:
         self._written: list[int] = []  # flat rows written by the current add (for the mirror)
         # one stream and no mirror: add() writes with scalar indices (_add_one)
         self.scalar_add = num_envs == 1 and self.mirror is None
+        # k_target cut: windows stop before a step whose row is flagged EXPLORATORY
+        self.cut_exploratory = cut_exploratory
 
     # ------------------------------------------------------------------ writing
     @property
@@ -188,7 +193,7 @@ class ReplayBuffer:
         self.count[e] += 1
         self.episode_t[e] += 1
 
-    def add_step(self, step: VectorStep) -> None:
+    def add_step(self, step: VectorStep, exploratory_E: np.ndarray | None = None) -> None:
         """Append one :class:`VectorStep` (see :meth:`add`)."""
         self.add(
             step.obs_E,
@@ -197,6 +202,7 @@ class ReplayBuffer:
             step.terminated_E,
             step.truncated_E,
             step.final_obs_E,
+            exploratory_E,
         )
 
     def add(
@@ -207,15 +213,19 @@ class ReplayBuffer:
         terminated_E: np.ndarray,
         truncated_E: np.ndarray,
         final_obs_E: np.ndarray | list[Any] | None = None,
+        exploratory_E: np.ndarray | None = None,
     ) -> None:
         """Append one step of every stream. ``final_obs_E[e]`` is the last observation of an
         episode that ended at this step (needed for truncations; stored for terminations too).
+        ``exploratory_E``: where the action was exploratory (flagged :data:`EXPLORATORY`).
 
         Every stream's row is written in one array operation, then the final rows of the streams
         whose episode ended (the streams' rows are disjoint, so this order stores what writing
         stream after stream stores)."""
         if self.scalar_add:
-            self._add_one(obs_E, action_E, reward_E, terminated_E, truncated_E, final_obs_E)
+            self._add_one(
+                obs_E, action_E, reward_E, terminated_E, truncated_E, final_obs_E, exploratory_E
+            )
             return
         term_E = np.asarray(terminated_E, dtype=bool).reshape(self.num_envs)
         trunc_E = np.asarray(truncated_E, dtype=bool).reshape(self.num_envs)
@@ -225,7 +235,10 @@ class ReplayBuffer:
         self.frames[e_E, slot_E] = obs[:, -1] if self.frame_stack > 1 else obs
         self.actions[e_E, slot_E] = action_E
         self.rewards[e_E, slot_E] = np.asarray(reward_E, dtype=np.float64)
-        self.flags[e_E, slot_E] = np.where(term_E, TERMINATED, 0) | np.where(trunc_E, TRUNCATED, 0)
+        flags_E = np.where(term_E, TERMINATED, 0) | np.where(trunc_E, TRUNCATED, 0)
+        if exploratory_E is not None:
+            flags_E |= np.where(np.asarray(exploratory_E, dtype=bool), EXPLORATORY, 0)
+        self.flags[e_E, slot_E] = flags_E
         self.t_ep[e_E, slot_E] = self.episode_t
         if self.mirror is not None:
             self._written.extend((e_E * self.capacity + slot_E).tolist())
@@ -248,6 +261,7 @@ class ReplayBuffer:
         terminated_E: Any,
         truncated_E: Any,
         final_obs_E: Any,
+        exploratory_E: Any = None,
     ) -> None:
         """:meth:`add` for one stream and no device mirror (``scalar_add``): the rows of the
         array path written with scalar indices (its array operations cost about 60
@@ -260,7 +274,9 @@ class ReplayBuffer:
             self._frame(np.asarray(obs_E)[0]),
             np.asarray(action_E)[0],
             float(np.asarray(reward_E, dtype=np.float64).reshape(-1)[0]),
-            int(TERMINATED if term else 0) | int(TRUNCATED if trunc else 0),
+            int(TERMINATED if term else 0)
+            | int(TRUNCATED if trunc else 0)
+            | int(EXPLORATORY if exploratory_E is not None and bool(exploratory_E[0]) else 0),
         )
         if term or trunc:
             if final_obs_E is None or final_obs_E[0] is None:
@@ -388,6 +404,7 @@ class ReplayBuffer:
             (flags_BK & TERMINATED) != 0,
             (flags_BK & TRUNCATED) != 0,
             gamma,
+            (flags_BK & EXPLORATORY) != 0 if self.cut_exploratory else None,
         )
         next_B = start_B + steps_B
         slot_B = start_B % self.capacity

@@ -391,6 +391,22 @@ AGENTS: tuple[Agent, ...] = (
     # k-step target (blr.optimism until-reward): the bias for the locks that pay only at their
     # end, none once the task has paid (MiniGrid Empty-5x5 and DoorKey-5x5: docs/design.md)
     Agent("Farsighter (optimism until reward)", "farsighter", {"blr.optimism": "until-reward"}),
+    # the k-step target cut before the first exploratory action (Watkins), against the default's
+    # larger of the k-step and the one-step target (whose upward bias is a bonus for not ending
+    # the episode); alone, with the posterior mean's targets, and after the first reward
+    Agent("Farsighter (cut)", "farsighter", {"k_target": "cut"}),
+    Agent("Farsighter (mean, cut)", "farsighter", {"blr.target": "mean", "k_target": "cut"}),
+    Agent(
+        "Farsighter (cut, optimism until reward)",
+        "farsighter",
+        {"k_target": "cut", "blr.optimism": "until-reward"},
+    ),
+    # the default's targets until the first positive reward, then the mean's target cut there
+    Agent(
+        "Farsighter (optimism until reward, then cut)",
+        "farsighter",
+        {"blr.optimism": "until-reward", "blr.calibrated_k_target": "cut"},
+    ),
 )
 COLORS = {a.label: f"C{i}" for i, a in enumerate(AGENTS)}
 _NAMED_ONLY = (
@@ -411,6 +427,10 @@ _NAMED_ONLY = (
     "Farsighter (greedy-action draw, k-step target)",
     "Farsighter (greedy-action draw, max by mean)",
     "Farsighter (optimism until reward)",
+    "Farsighter (cut)",
+    "Farsighter (mean, cut)",
+    "Farsighter (cut, optimism until reward)",
+    "Farsighter (optimism until reward, then cut)",
 )
 DEFAULT_AGENTS = tuple(a.label for a in AGENTS if a.label not in _NAMED_ONLY)
 """The default list: every agent once but those run only when named. "Farsighter (redraw k)" and
