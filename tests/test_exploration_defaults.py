@@ -757,7 +757,8 @@ def test_optimism_until_reward_switches_to_calibrated_targets_at_the_first_rewar
 def test_cut_records_where_the_draw_chose_otherwise_than_the_mean(tmp_path: Path) -> None:
     """k_target cut: the replay flags exactly the training actions that differ from the
     posterior mean's greedy action (every uniform action before learning_starts), and cuts its
-    windows there; evaluation actions record nothing. A seed batch refuses it."""
+    windows there; evaluation actions record nothing. A seed batch takes it (its runs are
+    those alone: tests/test_seeds.py)."""
     from farsighter.agents.farsighter_seeds import supports
     from farsighter.replay.buffer import EXPLORATORY
 
@@ -782,7 +783,7 @@ def test_cut_records_where_the_draw_chose_otherwise_than_the_mean(tmp_path: Path
     flagged = ((agent.replay.flags[0, :60] & EXPLORATORY) != 0).tolist()
     assert flagged == expected
     assert 5 < sum(expected[5:]) < 50  # both kinds occur after learning starts
-    assert "k_target cut" in supports(agent.cfg, None, torch.device("cpu"))
+    assert supports(agent.cfg, gym.spaces.Box(-1, 1, (4,)), torch.device("cpu")) == ""
 
 
 def test_until_reward_then_cut_switches_the_replay_to_cut_windows(tmp_path: Path) -> None:

@@ -95,6 +95,22 @@ def _files(run: Path) -> dict[str, list[str]]:
             "farsighter/DeepSea6-v0",
             {"blr__posterior_sampling": "uniform", "target_update_every": 400},
         ),
+        # the default's targets until each seed's own first reward, then the mean's target cut
+        # before exploratory actions (each seed's streams switch on their own)
+        (
+            "farsighter",
+            "farsighter/Chain8-v0",
+            {
+                "preset": "general",
+                "blr__optimism": "until-reward",
+                "blr__calibrated_k_target": "cut",
+                "k": 3,
+                "learning_starts": 100,
+                "batch_size": 24,
+            },
+        ),
+        # windows cut before exploratory actions from the start
+        ("farsighter", "farsighter/DeepSea6-v0", {"preset": "general", "k_target": "cut", "k": 3}),
         # RND: each seed's bonus (its networks, Adam, whitening and reward statistics)
         ("rnd", "CartPole-v1", {"preset": "general"}),
         # k-step intrinsic returns over windows cut by episode ends, two envs a seed
@@ -126,6 +142,12 @@ def test_a_seed_in_a_batch_trains_as_it_does_alone(
         for name in ("policy.pt", "checkpoint.pt"):
             _same_states(_agent_state(alone_dir / name), _agent_state(batch_dir / name))
         assert _files(alone_dir) == _files(batch_dir)
+    if values.get("blr__optimism") == "until-reward":  # the switch happened, seed by seed
+        steps = [
+            _agent_state(tmp_path / "batch" / f"s{seed}" / "checkpoint.pt")["calibrated"]
+            for seed in SEEDS
+        ]
+        assert any(steps), steps
     # the seeds are different runs
     first = _agent_state(tmp_path / "batch" / f"s{SEEDS[0]}" / "policy.pt")
     second = _agent_state(tmp_path / "batch" / f"s{SEEDS[1]}" / "policy.pt")

@@ -25,6 +25,7 @@ from __future__ import annotations
 import copy
 import dataclasses
 from collections.abc import Callable
+from typing import Literal
 
 import numpy as np
 import torch
@@ -32,7 +33,7 @@ import torch
 from farsighter.agents.common import TensorBatch, obs_tensor, td_loss, to_device
 from farsighter.agents.cuda_graph import Tensors
 from farsighter.agents.learner import CachedTarget
-from farsighter.config import Config
+from farsighter.config import BLRConfig, Config
 from farsighter.networks import Torso, online_and_target
 from farsighter.ops.blr import BLRHead
 from farsighter.ops.targets import centered_optimism, double_q_target
@@ -59,9 +60,7 @@ class FarsighterLoss:
         k-step target alone (no draw, no max with the one-step target; cut at exploratory
         actions where ``k_target = cut``)."""
         self.calibrated = True
-        self.blr = dataclasses.replace(self.blr, target="mean")
-        cut = self.k_target == "cut" or self.blr.calibrated_k_target == "cut"
-        self.k_target = "cut" if cut else "k"
+        self.blr, self.k_target = calibrated(self.blr, self.k_target)
 
     def copy_target(self) -> None:
         """Algorithm 1 line 8: target torso and target mean <- online ones (in place)."""
@@ -168,6 +167,14 @@ class FarsighterLoss:
 
 # The math of the loss on given features, shared with the seed-batched agent
 # (farsighter.agents.farsighter_seeds), which computes the features of every seed at once.
+
+
+def calibrated(blr: BLRConfig, k_target: str) -> tuple[BLRConfig, Literal["k", "cut"]]:
+    """``blr.optimism = until-reward``'s targets after its switch: the posterior mean's, and the
+    k-step target alone (cut at exploratory actions where ``k_target`` or
+    ``blr.calibrated_k_target`` is cut)."""
+    cut = k_target == "cut" or blr.calibrated_k_target == "cut"
+    return dataclasses.replace(blr, target="mean"), "cut" if cut else "k"
 
 
 def records_exploratory(cfg: Config) -> bool:

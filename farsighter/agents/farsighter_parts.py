@@ -13,7 +13,7 @@ import torch
 
 from farsighter.agents.common import RecentRows, TensorBatch
 from farsighter.agents.cuda_graph import Tensors
-from farsighter.agents.farsighter_loss import eq8_targets, target_draws
+from farsighter.agents.farsighter_loss import calibrated, eq8_targets, target_draws
 from farsighter.agents.farsighter_posterior import RECENT_FEATURES, FarsighterCounters, make_head
 from farsighter.agents.learner import make_target_cache
 from farsighter.config import Config
@@ -28,6 +28,9 @@ class SeedParts:
         self, cfg: Config, num_actions: int, dim: int, init_AD: torch.Tensor, device: torch.device
     ) -> None:
         self.cfg = cfg
+        # the targets (blr.target, k_target), which blr.optimism until-reward switches
+        self.blr, self.k_target = cfg.blr, cfg.k_target
+        self.calibrated = False
         self.head = make_head(cfg, num_actions, dim, init_AD, device)
         self.target_mean_AD = self.head.mean_AD.clone()
         self.counters = FarsighterCounters(k=cfg.k)
@@ -38,10 +41,15 @@ class SeedParts:
         self.gen.manual_seed(cfg.seed + 3)
         self.cache = make_target_cache(cfg, device, dim)  # FarsighterLoss's, keyed by its streams
 
+    def calibrate(self) -> None:
+        """``blr.optimism = until-reward``'s switch (``FarsighterLoss.calibrate``)."""
+        self.calibrated = True
+        self.blr, self.k_target = calibrated(self.blr, self.k_target)
+
     def draws(self, rows: int, one_step: bool) -> Tensors:
         """The targets' draws (``FarsighterAgent._draws``), from this seed's generator."""
         acting = partial(self.exploration.acting_draw, self.gen)
-        return target_draws(self.cfg.blr.target, self.head, rows, one_step, self.gen, acting)
+        return target_draws(self.blr.target, self.head, rows, one_step, self.gen, acting)
 
     def target_features(
         self,
@@ -68,7 +76,7 @@ class SeedParts:
     ) -> torch.Tensor:
         """y of Eq. 8 under this seed's posterior and target mean (``kind``: ``blr.target``
         unless given; ``mean`` for the target under the posterior mean)."""
-        head, blr = self.head, self.cfg.blr
+        head, blr = self.head, self.blr
         return eq8_targets(
             head,
             self.target_mean_AD,

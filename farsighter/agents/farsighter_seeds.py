@@ -37,6 +37,7 @@ from farsighter.agents.farsighter_loss import (
     one_step_draws,
     one_step_inputs,
     q_taken,
+    records_exploratory,
     uses_one_step,
 )
 from farsighter.agents.farsighter_parts import SeedParts
@@ -62,16 +63,6 @@ def supports(cfg: Config, obs_space: gym.Space | None, device: torch.device) -> 
     """Why ``cfg`` cannot train as a seed batch here ('' when it can)."""
     if cfg.adaptive_k.enabled:
         return "adaptive k trains its seeds one at a time (each seed's k moves on its own)"
-    if cfg.k_target == "cut":
-        return (
-            "k_target cut trains its seeds one at a time (each seed's actions are cut where its "
-            "own mean would have chosen otherwise)"
-        )
-    if cfg.blr.optimism != "always":
-        return (
-            "blr.optimism until-reward trains its seeds one at a time (each seed switches on "
-            "its own)"
-        )
     return stack_refusal(cfg, obs_space)
 
 
@@ -106,6 +97,9 @@ class SeedBatchFarsighter:
             # a copy into the target torsos empties every seed's cache (as CachedTarget's does)
             self.torso_target.register_load_state_dict_post_hook(lambda m, k, c=cache: c.clear())
         self.replay = seed_replay(cfgs, obs_space, device)
+        # k_target cut (now or after blr.optimism's switch): each seed's exploratory actions
+        self.records = records_exploratory(cfg)
+        self.exploratory_SE: np.ndarray | None = None
 
     @property
     def seeds(self) -> int:
@@ -117,20 +111,42 @@ class SeedBatchFarsighter:
         then Thompson sampling under its own draws (Algorithm 2)."""
         n = obs_SE.shape[1]
         if global_step < self.cfg.learning_starts:
+            if self.records:  # uniform actions are all exploratory
+                self.exploratory_SE = np.ones((self.seeds, n), dtype=bool)
             return np.stack([p.rng.integers(0, self.num_actions, size=n) for p in self.parts])
         with torch.no_grad():
             phi_SED = self.torso(obs_tensor(obs_SE, self.device))
-            q = [
-                p.exploration.q(phi_SED[s], obs_SE[s], p.gen).argmax(dim=1)
-                for s, p in enumerate(self.parts)
-            ]
-        return torch.stack(q).cpu().numpy()
+            actions_SE = torch.stack(
+                [
+                    p.exploration.q(phi_SED[s], obs_SE[s], p.gen).argmax(dim=1)
+                    for s, p in enumerate(self.parts)
+                ]
+            )
+            if self.records:  # where a seed's draw chose otherwise than its mean would
+                greedy_SE = torch.stack(
+                    [
+                        (phi_SED[s] @ p.head.mean_AD.T).argmax(dim=1)
+                        for s, p in enumerate(self.parts)
+                    ]
+                )
+                self.exploratory_SE = (actions_SE != greedy_SE).cpu().numpy()
+        return actions_SE.cpu().numpy()
 
     def observe(self, steps: Sequence[VectorStep]) -> None:
         """One vector step of every seed, in seed order."""
-        self.replay.add_steps(steps)
-        for p, st in zip(self.parts, steps, strict=True):
+        self.replay.add_steps(steps, self.exploratory_SE if self.records else None)
+        until_reward = self.cfg.blr.optimism == "until-reward"
+        for s, (p, st) in enumerate(zip(self.parts, steps, strict=True)):
+            if until_reward and not p.calibrated and bool(np.any(np.asarray(st.reward_E) > 0)):
+                self.calibrate(s)
             p.exploration.observe(np.logical_or(st.terminated_E, st.truncated_E))
+
+    def calibrate(self, s: int) -> None:
+        """Seed ``s``'s ``blr.optimism = until-reward`` switch (``FarsighterAgent.calibrate``):
+        its targets, and its streams' windows cut where its calibrated target is cut."""
+        p = self.parts[s]
+        p.calibrate()
+        self.replay.cut_E[self.replay.seed_streams(s)] = p.k_target == "cut"
 
     # ------------------------------------------------------------------ learning
     def learn(self, global_step: int) -> list[dict[str, torch.Tensor]]:
@@ -169,7 +185,9 @@ class SeedBatchFarsighter:
             return None
         t = batch_tensors(batch, self.device)
         inputs: Tensors = t.tensors()
-        one_step = uses_one_step(cfg.k_target) and k > 1
+        # each seed's targets as alone (blr.optimism switches them seed by seed)
+        one_step_S = [uses_one_step(p.k_target) and k > 1 for p in self.parts]
+        one_step = any(one_step_S)
         ends = {"": batch.index + batch.steps}  # the logical rows of s', for the target caches
         if one_step:  # the larger of the k-step and the one-step target (FarsighterAgent.update)
             one_inputs, one = one_step_inputs(self.replay, batch, cfg.gamma, self.device)
@@ -190,7 +208,7 @@ class SeedBatchFarsighter:
                 )
         seeded = [{key: by_seed(x)[s] for key, x in inputs.items()} for s in range(S)]
         ys = [
-            self._targets(p, mine, features, s, one_step)
+            self._targets(p, mine, features, s, one_step_S[s])
             for s, (p, mine) in enumerate(zip(self.parts, seeded, strict=True))
         ]
         phi_SBD = self.torso(by_seed(t.obs_B))
@@ -245,7 +263,7 @@ class SeedBatchFarsighter:
         one = one_step_batch(t, mine)
         one_next, one_next_target = features["one_"]
         one_B = p.y(one, one_next[s], one_next_target[s], one_step_draws(draws))
-        if self.cfg.k_target == "max":
+        if p.k_target == "max":
             return k_or_one_step(y_B, one_B)
         mean_B = p.y(t, features[""][0][s], features[""][1][s], {}, "mean")
         return k_or_one_step(

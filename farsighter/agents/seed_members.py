@@ -49,6 +49,7 @@ def seed_replay(
         obs_space.dtype,
         num_envs=cfg.num_envs,
         action_dtype=np.int32,
+        cut_exploratory=cfg.k_target == "cut",  # and each seed from its blr.optimism switch
         device=device
         if uses_gpu_replay(cfg, device, row_bytes(obs_space, 1) * len(cfgs))
         else None,
@@ -185,7 +186,7 @@ class FarsighterSeedMember(Member):
             "target_cache": p.cache.state_dict()
             if p.cache is not None and include_replay
             else None,
-        }
+        } | ({"calibrated": p.calibrated} if self.cfg.blr.optimism != "always" else {})
 
     def load_state_dict(self, state: dict[str, Any]) -> None:
         """A checkpoint of this seed (written alone or in a batch). Seeds resume together only
@@ -202,6 +203,8 @@ class FarsighterSeedMember(Member):
         for key, value in state["counters"].items():
             setattr(p.counters, key, value)
         p.recent_phi.load_state_dict(state["recent_phi"])
+        if state.get("calibrated", False) and not p.calibrated:
+            b.calibrate(s)
         p.exploration.load_state_dict(state.get("exploration", state))
         if p.cache is not None:  # the rows it keeps, when the checkpoint has them
             p.cache.load_state_dict(state.get("target_cache"))

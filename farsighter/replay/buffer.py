@@ -164,8 +164,18 @@ class ReplayBuffer:
         self._written: list[int] = []  # flat rows written by the current add (for the mirror)
         # one stream and no mirror: add() writes with scalar indices (_add_one)
         self.scalar_add = num_envs == 1 and self.mirror is None
-        # k_target cut: windows stop before a step whose row is flagged EXPLORATORY
-        self.cut_exploratory = cut_exploratory
+        # k_target cut: in the streams marked here, windows stop before a step whose row is
+        # flagged EXPLORATORY (per stream: the seeds of a batch switch on their own)
+        self.cut_E = np.full(num_envs, cut_exploratory, dtype=bool)
+
+    @property
+    def cut_exploratory(self) -> bool:
+        """Whether every stream cuts its windows at exploratory actions (``k_target cut``)."""
+        return bool(self.cut_E.all())
+
+    @cut_exploratory.setter
+    def cut_exploratory(self, cut: bool) -> None:
+        self.cut_E[:] = cut
 
     # ------------------------------------------------------------------ writing
     @property
@@ -404,7 +414,9 @@ class ReplayBuffer:
             (flags_BK & TERMINATED) != 0,
             (flags_BK & TRUNCATED) != 0,
             gamma,
-            (flags_BK & EXPLORATORY) != 0 if self.cut_exploratory else None,
+            ((flags_BK & EXPLORATORY) != 0) & self.cut_E[e_B][:, None]
+            if self.cut_E.any()
+            else None,
         )
         next_B = start_B + steps_B
         slot_B = start_B % self.capacity

@@ -101,8 +101,11 @@ class SeedReplay(ReplayBuffer):
         start_B = np.concatenate([start for rows in chosen for _, start in rows])
         return self.gather(e_B, start_B, k, gamma, on_device=on_device)
 
-    def add_steps(self, steps: Sequence[VectorStep]) -> None:
-        """One vector step of every seed, in seed order, into the seeds' streams."""
+    def add_steps(
+        self, steps: Sequence[VectorStep], exploratory_SE: np.ndarray | None = None
+    ) -> None:
+        """One vector step of every seed, in seed order, into the seeds' streams
+        (``exploratory_SE``: which actions were exploratory, ``ReplayBuffer.add``'s flags)."""
         ended = any(st.final_obs_E is not None for st in steps)
         self.add(
             np.concatenate([st.obs_E for st in steps]),
@@ -119,6 +122,7 @@ class SeedReplay(ReplayBuffer):
             ]
             if ended
             else None,
+            None if exploratory_SE is None else np.asarray(exploratory_SE).reshape(-1),
         )
 
     def member_state(self, s: int) -> dict[str, Any]:
