@@ -108,6 +108,9 @@ RUNS: dict[str, tuple[str, str, int, dict[str, Any]]] = {
     "ddqn-general-deepsea": ("ddqn", "farsighter/DeepSea10-v0", 3_000, GENERAL),
     "farsighter-general-deepsea": ("farsighter", "farsighter/DeepSea10-v0", 3_000, GENERAL),
     "bdqn-general-deepsea": ("bdqn", "farsighter/DeepSea10-v0", 3_000, GENERAL),
+    # the defaults past their first positive reward (the chain L = 8 pays within the run): the
+    # switch to the posterior mean's target cut before exploratory actions (blr.optimism)
+    "farsighter-general-chain": ("farsighter", "farsighter/Chain8-v0", 3_000, GENERAL),
 }
 
 

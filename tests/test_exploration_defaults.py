@@ -626,6 +626,11 @@ def test_auto_gives_discrete_tasks_the_general_preset_and_keeps_table_1_selectab
     assert tuple(getattr(paper, f) for f in learner[:5]) == ("rmsprop", 0.0025, 4, 32, 1_000)
     assert paper.sample_recent is True  # Algorithm 1 line 4 under the paper's presets
     assert "general" in PRESETS and PRESETS["general"].per_algo["farsighter"]["k_target"] == "max"
+    # ... until the first positive reward, then the mean's target cut at exploratory actions
+    defaults = make_config("farsighter", "farsighter/Chain10-v0")
+    assert (defaults.blr.optimism, defaults.blr.calibrated_k_target) == ("until-reward", "cut")
+    bdqn = make_config("bdqn", "farsighter/Chain10-v0")
+    assert (bdqn.blr.optimism, bdqn.k_target) == ("always", "k")  # the baseline as it was
     # a flag still wins over the preset's per-algorithm values
     assert make_config("farsighter", "CartPole-v1", blr__redraw="step").blr.redraw == "step"
 
@@ -815,3 +820,39 @@ def test_until_reward_then_cut_switches_the_replay_to_cut_windows(tmp_path: Path
     # the plain switch neither records nor cuts
     plain = make_agent(tmp_path / "c", **{**values, "blr.calibrated_k_target": "k"})
     assert not plain.cut and not plain.replay.cut_exploratory
+
+
+def test_until_reward_then_cut_is_the_default_run_until_the_first_reward(tmp_path: Path) -> None:
+    """Until its first positive reward a run with the default switch is the run without it,
+    bit for bit (it records its exploratory actions beside the same rows): the chain L = 8 pays
+    nothing in the first 400 steps of seed 3."""
+    from farsighter.replay.buffer import EXPLORATORY
+    from farsighter.train import train
+    from tests.test_seeds import _agent_state, _files, _same_states
+
+    runs = {}
+    for name, extra in (
+        ("plain", {"blr__optimism": "always"}),
+        ("switch", {}),  # the defaults: until-reward, then cut
+    ):
+        cfg = tiny(
+            "farsighter",
+            tmp_path / name,
+            env="farsighter/Chain8-v0",
+            preset="general",
+            k=3,
+            learning_starts=100,
+            batch_size=24,
+            total_steps=400,
+            seed=3,
+            **extra,
+        )
+        train(cfg)
+        runs[name] = _agent_state(tmp_path / name / "checkpoint.pt")
+    assert runs["switch"].pop("calibrated") is False
+    plain_replay, switch_replay = runs["plain"].pop("replay"), runs["switch"].pop("replay")
+    _same_states(runs["plain"], runs["switch"])
+    flags = switch_replay["flags"]
+    assert np.array_equal(plain_replay["flags"], flags & ~EXPLORATORY)
+    assert (flags & EXPLORATORY).any()
+    assert _files(tmp_path / "plain") == _files(tmp_path / "switch")

@@ -209,6 +209,10 @@ def test_agents_are_one_config_each_on_the_auto_preset(tmp_path: Path) -> None:
         "Farsighter (greedy-action draw, k-step target)",
         "Farsighter (greedy-action draw, max by mean)",
         "Farsighter (optimism until reward)",
+        "Farsighter (cut)",
+        "Farsighter (mean, cut)",
+        "Farsighter (cut, optimism until reward)",
+        "Farsighter (optimism until reward, then cut)",
     ]
     by = {a.label: a for a in AGENTS}
     # the default list trains no config twice, and leaves out the variants run only when named
@@ -230,6 +234,10 @@ def test_agents_are_one_config_each_on_the_auto_preset(tmp_path: Path) -> None:
         "Farsighter (greedy-action draw, k-step target)",
         "Farsighter (greedy-action draw, max by mean)",
         "Farsighter (optimism until reward)",
+        "Farsighter (cut)",
+        "Farsighter (mean, cut)",
+        "Farsighter (cut, optimism until reward)",
+        "Farsighter (optimism until reward, then cut)",
     }
     assert not named_only & set(StudyConfig().agents)
     assert "Farsighter (redraw step)" in StudyConfig().agents
@@ -242,6 +250,7 @@ def test_agents_are_one_config_each_on_the_auto_preset(tmp_path: Path) -> None:
             "Farsighter (redraw k)",
             "Farsighter (random features)",
             "Farsighter (data weight 100)",
+            "Farsighter (optimism until reward, then cut)",
         )
     ]
     assert len({repr(dataclasses.replace(c, run_dir="")) for c in every}) == len(every)
@@ -258,6 +267,20 @@ def test_agents_are_one_config_each_on_the_auto_preset(tmp_path: Path) -> None:
         by["Farsighter (data weight 100)"], QUICK, 3, tmp_path, (chain_id(10), 10_000)
     )
     assert dataclasses.replace(weight_100, run_dir="") == dataclasses.replace(every[3], run_dir="")
+    switch = run_config(
+        by["Farsighter (optimism until reward, then cut)"], QUICK, 3, tmp_path, (chain_id(10), 1)
+    )
+    assert (switch.blr.optimism, switch.blr.calibrated_k_target) == ("until-reward", "cut")
+    assert dataclasses.replace(switch, run_dir="") == dataclasses.replace(
+        run_config(by["Farsighter"], QUICK, 3, tmp_path, (chain_id(10), 1)), run_dir=""
+    )
+    # the variants of the targets keep them for the whole run, as when their studies were made
+    for label in ("Farsighter (mean, k-step target)", "Farsighter (cut)"):
+        assert run_config(by[label], QUICK, 3, tmp_path, (chain_id(10), 1)).blr.optimism == "always"
+    until_k = run_config(
+        by["Farsighter (optimism until reward)"], QUICK, 3, tmp_path, (chain_id(10), 1)
+    )
+    assert until_k.blr.calibrated_k_target == "k"
     configs = [
         run_config(by[label], QUICK, 3, tmp_path, (chain_id(10), 10_000))
         for label in StudyConfig().agents
@@ -265,7 +288,10 @@ def test_agents_are_one_config_each_on_the_auto_preset(tmp_path: Path) -> None:
     assert len({repr(dataclasses.replace(c, run_dir="")) for c in configs}) == len(configs)
     assert by["Farsighter"].overrides == {} and by["DDQN"].overrides == {}
     assert by["Farsighter (redraw k)"].overrides == {"blr.redraw": "k"}
-    assert by["Farsighter (centred draw)"].overrides == {"blr.center_sample": True}
+    assert by["Farsighter (centred draw)"].overrides == {
+        "blr.center_sample": True,
+        "blr.optimism": "always",
+    }
     fourier = run_config(by["Farsighter (Fourier features)"], QUICK, 3, tmp_path, (chain_id(10), 1))
     assert (fourier.blr.random_features_kind, fourier.blr.random_features) == ("fourier", 512)
     fixed = run_config(by["Farsighter (fixed width)"], QUICK, 3, tmp_path, (chain_id(10), 1))

@@ -66,11 +66,13 @@ class BLRConfig:
     """always: the targets' optimism (``target`` and ``Config.k_target`` as set) for the whole
     run. until-reward: as set until the run's first positive reward, then calibrated targets
     for good, the posterior mean and the k-step target alone (``target = mean``, ``k_target =
-    k``): the upward bias that carries a lock that pays only at its end (the chain, deep sea)
-    is a bonus for not ending the episode, which on a task whose reward ends it (a MiniGrid
-    goal, FrozenLake) makes reaching the reward the worst action (docs/design.md, the
-    plainest MiniGrid room). The switch is part of the checkpoint; a run with it trains its
-    seeds one at a time and its update eagerly (no CUDA graph, no compile). Our extension."""
+    calibrated_k_target``, the general preset's cut): the upward bias that carries a lock that
+    pays only at its end (the chain, deep sea) is a bonus for not ending the episode, which on
+    a task whose reward ends it (a MiniGrid goal, FrozenLake) makes reaching the reward the
+    worst action (docs/design.md, the plainest MiniGrid room). Before the switch a run is the
+    run without it, bit for bit. The switch is part of the checkpoint; each seed of a seed
+    batch switches on its own; a run with it updates eagerly (no CUDA graph, no compile). Our
+    extension."""
     calibrated_k_target: Literal["k", "cut"] = "k"
     """With ``optimism = until-reward`` (or ``Config.k_target = cut``): the k-step target after
     the switch. k: the plain k-step return, which follows the behaviour, so a lock whose path

@@ -314,6 +314,12 @@ TASKS: dict[str, tuple[str, int]] = {
 """Environment id -> (family, size)."""
 
 # One config per agent for every task and size: the `auto` preset and these overrides only.
+_ALWAYS = {"blr.optimism": "always"}
+"""Pinned by the agents that compare kinds of target for the whole run (the general preset's
+Farsighter switches to the posterior mean's cut target at its first positive reward since
+docs/results/explore/until-reward-cut; the studies in docs/results that name them were made
+before, with the targets for the whole run)."""
+
 AGENTS: tuple[Agent, ...] = (
     Agent("DDQN", "ddqn"),
     Agent("k-DDQN", "kddqn"),
@@ -329,12 +335,14 @@ AGENTS: tuple[Agent, ...] = (
     Agent("Farsighter (redraw revisit)", "farsighter", {"blr.redraw": "revisit"}),
     # the plain k-step target, against the default's max with the one-step target (whose upward
     # bias the stochastic deep sea tests)
-    Agent("Farsighter (k-step target)", "farsighter", {"k_target": "k"}),
+    Agent("Farsighter (k-step target)", "farsighter", {"k_target": "k", **_ALWAYS}),
     # the posterior mean at the next state, against the default's posterior draw there (whose
     # optimism is a bonus at every step that does not end the episode)
-    Agent("Farsighter (mean target)", "farsighter", {"blr.target": "mean"}),
+    Agent("Farsighter (mean target)", "farsighter", {"blr.target": "mean", **_ALWAYS}),
     Agent(
-        "Farsighter (mean, k-step target)", "farsighter", {"blr.target": "mean", "k_target": "k"}
+        "Farsighter (mean, k-step target)",
+        "farsighter",
+        {"blr.target": "mean", "k_target": "k", **_ALWAYS},
     ),
     # the posterior over the learned features and 512 fixed random features of the observation,
     # so that its uncertainty is about states (farsighter.networks.RandomFeatureTorso): the
@@ -344,7 +352,7 @@ AGENTS: tuple[Agent, ...] = (
     Agent("Farsighter (learned features)", "farsighter", {"blr.random_features": 0}),
     # the sampled target's optimism centred in each minibatch (blr.center_sample), against the
     # default's raw draw, whose bonus at every step that does not end the episode FrozenLake shows
-    Agent("Farsighter (centred draw)", "farsighter", {"blr.center_sample": True}),
+    Agent("Farsighter (centred draw)", "farsighter", {"blr.center_sample": True, **_ALWAYS}),
     # a prior three times the noise floor (bsuite's bootstrapped DQN scales its prior functions
     # by 3), against the default's prior equal to it: wider uncertainty where the run has not
     # been, against the same shrinkage where it has
@@ -369,39 +377,48 @@ AGENTS: tuple[Agent, ...] = (
     # the chosen one's draw, against the default's larger of the two drawn targets (whose
     # upward bias, compounded by bootstrapping, lifts Q on DoorKey-5x5 to about 15 where no
     # return exceeds 1: benchmarks/value_calibration.py)
-    Agent("Farsighter (max by mean)", "farsighter", {"k_target": "max-mean"}),
+    Agent("Farsighter (max by mean)", "farsighter", {"k_target": "max-mean", **_ALWAYS}),
     # the target's draw of the action greedy under the mean (zero-mean noise), against the
     # default's largest of the actions' draws (blr.target sample-greedy)
-    Agent("Farsighter (greedy-action draw)", "farsighter", {"blr.target": "sample-greedy"}),
+    Agent(
+        "Farsighter (greedy-action draw)", "farsighter", {"blr.target": "sample-greedy", **_ALWAYS}
+    ),
     # both upward biases of the default's target out: the greedy action's draw and the k-step
     # target alone (DoorKey-5x5: Q at the start 0.10, where the default's is 14.4)
     Agent(
         "Farsighter (greedy-action draw, k-step target)",
         "farsighter",
-        {"blr.target": "sample-greedy", "k_target": "k"},
+        {"blr.target": "sample-greedy", "k_target": "k", **_ALWAYS},
     ),
     # no draw chooses: the greedy action's draw, and the k-step or the one-step target by their
     # means (the optimality-tightening max kept, the larger of two drawn targets' bias out)
     Agent(
         "Farsighter (greedy-action draw, max by mean)",
         "farsighter",
-        {"blr.target": "sample-greedy", "k_target": "max-mean"},
+        {"blr.target": "sample-greedy", "k_target": "max-mean", **_ALWAYS},
     ),
     # the default's optimism until the run's first positive reward, then the posterior mean's
     # k-step target (blr.optimism until-reward): the bias for the locks that pay only at their
     # end, none once the task has paid (MiniGrid Empty-5x5 and DoorKey-5x5: docs/design.md)
-    Agent("Farsighter (optimism until reward)", "farsighter", {"blr.optimism": "until-reward"}),
+    Agent(
+        "Farsighter (optimism until reward)",
+        "farsighter",
+        {"blr.optimism": "until-reward", "blr.calibrated_k_target": "k"},
+    ),
     # the k-step target cut before the first exploratory action (Watkins), against the default's
     # larger of the k-step and the one-step target (whose upward bias is a bonus for not ending
     # the episode); alone, with the posterior mean's targets, and after the first reward
-    Agent("Farsighter (cut)", "farsighter", {"k_target": "cut"}),
-    Agent("Farsighter (mean, cut)", "farsighter", {"blr.target": "mean", "k_target": "cut"}),
+    Agent("Farsighter (cut)", "farsighter", {"k_target": "cut", **_ALWAYS}),
+    Agent(
+        "Farsighter (mean, cut)", "farsighter", {"blr.target": "mean", "k_target": "cut", **_ALWAYS}
+    ),
     Agent(
         "Farsighter (cut, optimism until reward)",
         "farsighter",
         {"k_target": "cut", "blr.optimism": "until-reward"},
     ),
-    # the default's targets until the first positive reward, then the mean's target cut there
+    # the default's targets until the first positive reward, then the mean's target cut there:
+    # the defaults since docs/results/explore/until-reward-cut (the same config as "Farsighter")
     Agent(
         "Farsighter (optimism until reward, then cut)",
         "farsighter",
@@ -434,9 +451,10 @@ _NAMED_ONLY = (
 )
 DEFAULT_AGENTS = tuple(a.label for a in AGENTS if a.label not in _NAMED_ONLY)
 """The default list: every agent once but those run only when named. "Farsighter (redraw k)" and
-"Farsighter (random features)" and "Farsighter (data weight 100)" build the same config as
-"Farsighter" now that a draw held for k steps, the random features and the data weight 100 are the
-defaults (the saved studies in docs/results name them);
+"Farsighter (random features)", "Farsighter (data weight 100)" and "Farsighter (optimism until
+reward, then cut)" build the same config as "Farsighter" now that a draw held for k steps, the
+random features, the data weight 100 and the switch at the first reward are the defaults (the
+saved studies in docs/results name them);
 the two mean-target variants belong to the comparison of the targets
 (docs/results/explore/targets), and "Farsighter (learned features)" to that of the features."""
 
