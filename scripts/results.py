@@ -329,6 +329,26 @@ ENTRIES = (
         1814,
     ),
     Entry(
+        "explore/until-reward-cut",
+        "explore --families chain deepsea empty frozenlake doorkey --sizes 30 20 5 4 --seeds 1 2 3 "
+        "4 5 --agents 'Farsighter (optimism until reward, then cut)' --workers 2 "
+        "--seeds-per-batch 1",
+        "the default since session 32 (optimism until the first reward, then the mean's target "
+        "cut before exploratory actions) on the chain L = 30, deep sea N = 20, Empty-5x5, "
+        "FrozenLake 4x4 and DoorKey-5x5 (made as five calls, one a task, the MiniGrid ones with "
+        "3 seeds; this one call also runs the other sizes the families share and MiniGrid "
+        "seeds 4 and 5)",
+        1667,
+    ),
+    Entry(
+        "explore/cut-chain30",
+        "explore --families chain --sizes 30 --seeds 1 2 3 4 5 --agents 'Farsighter (cut)' "
+        "'Farsighter (cut, optimism until reward)' --workers 2",
+        "the k-step target cut before exploratory actions with the draw for the whole run, and "
+        "from the start with the switch, on the chain L = 30",
+        255,
+    ),
+    Entry(
         "minatar",
         "atari --games minatar --agents DDQN BDQN Farsighter --seeds 1 2 --steps 50000 "
         "--eval-every 10000 --eval-episodes 10",
