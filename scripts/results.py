@@ -341,6 +341,20 @@ ENTRIES = (
         1667,
     ),
     Entry(
+        "explore/switch-deepsea",
+        "explore --families deepsea --sizes 10 14 --seeds 1 2 3 4 5 --agents Farsighter "
+        "--workers 2",
+        "the defaults since session 32 on deep sea N = 10 and 14 (their seeds in batches)",
+        362,
+    ),
+    Entry(
+        "explore/switch-deepsea-stochastic",
+        "explore --families deepsea-stochastic --sizes 6 10 14 --seeds 1 2 3 4 5 --agents "
+        "Farsighter --workers 2",
+        "the defaults since session 32 on the stochastic deep sea N = 6, 10 and 14",
+        303,
+    ),
+    Entry(
         "explore/cut-chain30",
         "explore --families chain --sizes 30 --seeds 1 2 3 4 5 --agents 'Farsighter (cut)' "
         "'Farsighter (cut, optimism until reward)' --workers 2",
