@@ -856,3 +856,30 @@ def test_until_reward_then_cut_is_the_default_run_until_the_first_reward(tmp_pat
     assert np.array_equal(plain_replay["flags"], flags & ~EXPLORATORY)
     assert (flags & EXPLORATORY).any()
     assert _files(tmp_path / "plain") == _files(tmp_path / "switch")
+
+
+def test_cut_margin_flags_only_actions_the_posterior_is_sure_are_worse(tmp_path: Path) -> None:
+    """blr.cut_margin m: an action other than the mean's greedy one is flagged only where its
+    mean Q is below the greedy's by more than m sds of the difference (the variances read from
+    every action's predictive variance, another code path); m = 0 flags every difference."""
+    from farsighter.agents.farsighter_loss import exploratory_actions
+
+    agent = make_agent(tmp_path / "a", **{"k_target": "cut", "k": 3})
+    g = torch.Generator().manual_seed(1)
+    agent.head.mean_AD.normal_(std=0.5, generator=g)
+    phi = torch.randn(400, agent.head.dim, generator=g)
+    actions = torch.randint(0, agent.num_actions, (400,), generator=g)
+    q = phi @ agent.head.mean_AD.T
+    greedy = q.argmax(dim=1)
+    var = agent.head.predictive_var(phi)
+    rows = torch.arange(400)
+    gap = q[rows, greedy] - q[rows, actions]
+    sd = (var[rows, greedy] + var[rows, actions]).sqrt()
+    for margin in (0.0, 0.5, 1.0, 3.0):
+        expected = ((actions != greedy) & (gap > margin * sd)).numpy()
+        if margin == 0:
+            expected = (actions != greedy).numpy()
+        got = exploratory_actions(agent.head, phi, actions, margin)
+        assert np.array_equal(got, expected), margin
+    counts = [exploratory_actions(agent.head, phi, actions, m).sum() for m in (0.0, 1.0, 3.0)]
+    assert counts[0] > counts[1] > counts[2] > 0, counts  # the margin bites at each step

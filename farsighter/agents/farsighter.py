@@ -43,6 +43,7 @@ from farsighter.agents.common import (
 from farsighter.agents.cuda_graph import Tensors
 from farsighter.agents.farsighter_loss import (
     FarsighterLoss,
+    exploratory_actions,
     one_step_inputs,
     records_exploratory,
     uses_one_step,
@@ -116,8 +117,9 @@ class FarsighterAgent:
                 q_EA = phi_ED @ self.head.mean_AD.T
             actions_E = q_EA.argmax(dim=1)
             if explore and self.cut:  # the draw chose otherwise than the mean would
-                greedy_E = (phi_ED @ self.head.mean_AD.T).argmax(dim=1)
-                self.exploratory_E = (actions_E != greedy_E).cpu().numpy()
+                self.exploratory_E = exploratory_actions(
+                    self.head, phi_ED, actions_E, self.cfg.blr.cut_margin
+                )
         return actions_E.cpu().numpy()
 
     @torch.no_grad()

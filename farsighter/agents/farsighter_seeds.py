@@ -31,6 +31,7 @@ from farsighter.agents.common import (
 )
 from farsighter.agents.cuda_graph import Tensors
 from farsighter.agents.farsighter_loss import (
+    exploratory_actions,
     k_or_one_step,
     max_targets,
     one_step_batch,
@@ -123,13 +124,13 @@ class SeedBatchFarsighter:
                 ]
             )
             if self.records:  # where a seed's draw chose otherwise than its mean would
-                greedy_SE = torch.stack(
+                margin = self.cfg.blr.cut_margin
+                self.exploratory_SE = np.stack(
                     [
-                        (phi_SED[s] @ p.head.mean_AD.T).argmax(dim=1)
+                        exploratory_actions(p.head, phi_SED[s], actions_SE[s], margin)
                         for s, p in enumerate(self.parts)
                     ]
                 )
-                self.exploratory_SE = (actions_SE != greedy_SE).cpu().numpy()
         return actions_SE.cpu().numpy()
 
     def observe(self, steps: Sequence[VectorStep]) -> None:

@@ -80,6 +80,15 @@ class BLRConfig:
     5/5, held 1/5, docs/results/explore/until-reward). cut: the return stopped before the first
     exploratory action (``Config.k_target = cut``; the run records which actions were from its
     start). Our extension."""
+    cut_margin: float = 0.0
+    """With ``Config.k_target = cut`` (now or after the switch): how sure the posterior must be
+    that an action other than the mean's greedy one was worse before a window is cut there: its
+    mean Q below the greedy action's by more than this many predictive sds of the difference,
+    sqrt(var_taken + var_greedy). 0: wherever the two differ (Watkins). Where the actions'
+    values nearly tie (a MiniGrid room, where the draws choose among moves a hundredth apart)
+    every draw differs from the mean somewhere and the windows shrink to one step; a margin
+    keeps the k-step return there and cuts where a move is clearly wrong (the chain's). Our
+    extension."""
     target_noise_scale: float = 1.0
     """With target = sample or sample-greedy: a factor on the draw added to the next state's value
     (1: the posterior's own width). The draw's upward bias (the largest of the actions' draws,
@@ -132,6 +141,10 @@ class BLRConfig:
             (self.cov_scale > 0, f"blr.cov_scale must be > 0 (got {self.cov_scale})"),
             (0 < self.forgetting <= 1, "blr.forgetting must be in (0, 1]"),
             (self.data_weight > 0, f"blr.data_weight must be > 0 (got {self.data_weight})"),
+            (
+                self.cut_margin >= 0 and math.isfinite(self.cut_margin),
+                f"blr.cut_margin must be a finite number >= 0 (got {self.cut_margin})",
+            ),
             (
                 self.target_noise_scale >= 0 and math.isfinite(self.target_noise_scale),
                 f"blr.target_noise_scale must be a finite number >= 0 (got "
