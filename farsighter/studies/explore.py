@@ -424,6 +424,8 @@ AGENTS: tuple[Agent, ...] = (
         "farsighter",
         {"blr.optimism": "until-reward", "blr.calibrated_k_target": "cut"},
     ),
+    # the cut only where the posterior is sure the action taken was worse (blr.cut_margin)
+    Agent("Farsighter (cut margin 1)", "farsighter", {"blr.cut_margin": 1.0}),
 )
 COLORS = {a.label: f"C{i}" for i, a in enumerate(AGENTS)}
 _NAMED_ONLY = (
@@ -448,6 +450,7 @@ _NAMED_ONLY = (
     "Farsighter (mean, cut)",
     "Farsighter (cut, optimism until reward)",
     "Farsighter (optimism until reward, then cut)",
+    "Farsighter (cut margin 1)",
 )
 DEFAULT_AGENTS = tuple(a.label for a in AGENTS if a.label not in _NAMED_ONLY)
 """The default list: every agent once but those run only when named. "Farsighter (redraw k)" and
