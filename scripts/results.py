@@ -355,6 +355,28 @@ ENTRIES = (
         303,
     ),
     Entry(
+        "explore/switch-empty8",
+        "explore --families empty --sizes 8 --seeds 1 2 --agents Farsighter --workers 2",
+        "the defaults since session 32 on MiniGrid Empty-8x8, 2 seeds x 100k steps",
+        300,
+    ),
+    Entry(
+        "explore/until-reward-empty8",
+        "explore --families empty --sizes 8 --seeds 1 2 --agents "
+        "'Farsighter (optimism until reward)' --workers 2",
+        "the switch with the plain k-step target after it on MiniGrid Empty-8x8, 2 seeds",
+        268,
+    ),
+    Entry(
+        "explore/cut-margin",
+        "explore --families chain empty --sizes 30 8 --seeds 1 2 3 4 5 --agents "
+        "'Farsighter (cut margin 1)' --workers 2",
+        "blr.cut_margin 1 on the chain L = 30 (5 seeds) and Empty-8x8 (made as two calls, "
+        "Empty-8x8 with seeds 1 and 2; this one call also runs the chain at 8 and Empty at 30 "
+        "where the families have them, and Empty seeds 3 to 5)",
+        371,
+    ),
+    Entry(
         "explore/cut-chain30",
         "explore --families chain --sizes 30 --seeds 1 2 3 4 5 --agents 'Farsighter (cut)' "
         "'Farsighter (cut, optimism until reward)' --workers 2",
