@@ -862,7 +862,7 @@ def test_cut_margin_flags_only_actions_the_posterior_is_sure_are_worse(tmp_path:
     """blr.cut_margin m: an action other than the mean's greedy one is flagged only where its
     mean Q is below the greedy's by more than m sds of the difference (the variances read from
     every action's predictive variance, another code path); m = 0 flags every difference."""
-    from farsighter.agents.farsighter_loss import exploratory_actions
+    from farsighter.exploration.optimism import exploratory_actions
 
     agent = make_agent(tmp_path / "a", **{"k_target": "cut", "k": 3})
     g = torch.Generator().manual_seed(1)

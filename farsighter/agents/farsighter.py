@@ -43,9 +43,7 @@ from farsighter.agents.common import (
 from farsighter.agents.cuda_graph import Tensors
 from farsighter.agents.farsighter_loss import (
     FarsighterLoss,
-    exploratory_actions,
     one_step_inputs,
-    records_exploratory,
     uses_one_step,
 )
 from farsighter.agents.farsighter_posterior import (
@@ -60,6 +58,7 @@ from farsighter.agents.learner import Learner, make_target_cache
 from farsighter.agents.protocol import AgentFactory
 from farsighter.config import Config
 from farsighter.exploration import ThompsonExploration
+from farsighter.exploration.optimism import exploratory_actions, records_exploratory
 from farsighter.replay import VectorStep
 
 

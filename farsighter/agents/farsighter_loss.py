@@ -23,9 +23,7 @@ and the target features of s' may come from the target cache.
 from __future__ import annotations
 
 import copy
-import dataclasses
 from collections.abc import Callable
-from typing import Literal
 
 import numpy as np
 import torch
@@ -33,7 +31,8 @@ import torch
 from farsighter.agents.common import TensorBatch, obs_tensor, td_loss, to_device
 from farsighter.agents.cuda_graph import Tensors
 from farsighter.agents.learner import CachedTarget
-from farsighter.config import BLRConfig, Config
+from farsighter.config import Config
+from farsighter.exploration.optimism import calibrated
 from farsighter.networks import Torso, online_and_target
 from farsighter.ops.blr import BLRHead
 from farsighter.ops.targets import centered_optimism, double_q_target
@@ -167,43 +166,6 @@ class FarsighterLoss:
 
 # The math of the loss on given features, shared with the seed-batched agent
 # (farsighter.agents.farsighter_seeds), which computes the features of every seed at once.
-
-
-def calibrated(blr: BLRConfig, k_target: str) -> tuple[BLRConfig, Literal["k", "cut"]]:
-    """``blr.optimism = until-reward``'s targets after its switch: the posterior mean's, and the
-    k-step target alone (cut at exploratory actions where ``k_target`` or
-    ``blr.calibrated_k_target`` is cut)."""
-    cut = k_target == "cut" or blr.calibrated_k_target == "cut"
-    return dataclasses.replace(blr, target="mean"), "cut" if cut else "k"
-
-
-@torch.no_grad()
-def exploratory_actions(
-    head: BLRHead, phi_ED: torch.Tensor, actions_E: torch.Tensor, margin: float
-) -> np.ndarray:
-    """Which of the actions taken at features ``phi_ED`` were exploratory (``k_target = cut``):
-    not the posterior mean's greedy action, and (``margin`` > 0, ``blr.cut_margin``) with a mean
-    Q below the greedy action's by more than ``margin`` predictive sds of the difference."""
-    q_EA = phi_ED @ head.mean_AD.T
-    greedy_E = q_EA.argmax(dim=1)
-    differs_E = actions_E != greedy_E
-    if margin > 0 and bool(differs_E.any()):
-        rows = differs_E.nonzero()[:, 0]
-        phi, taken, greedy = phi_ED[rows], actions_E[rows], greedy_E[rows]
-        gap = q_EA[rows, greedy] - q_EA[rows, taken]
-        sd = (
-            head.predictive_var_action(phi, taken) + head.predictive_var_action(phi, greedy)
-        ).sqrt()
-        differs_E[rows] = gap > margin * sd
-    return differs_E.cpu().numpy()
-
-
-def records_exploratory(cfg: Config) -> bool:
-    """Whether a run records which of its actions were exploratory: it cuts k-step windows
-    before them (``k_target = cut``) now or after ``blr.optimism``'s switch."""
-    return cfg.k_target == "cut" or (
-        cfg.blr.optimism == "until-reward" and cfg.blr.calibrated_k_target == "cut"
-    )
 
 
 def uses_one_step(k_target: str) -> bool:

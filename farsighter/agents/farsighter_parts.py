@@ -13,11 +13,12 @@ import torch
 
 from farsighter.agents.common import RecentRows, TensorBatch
 from farsighter.agents.cuda_graph import Tensors
-from farsighter.agents.farsighter_loss import calibrated, eq8_targets, target_draws
+from farsighter.agents.farsighter_loss import eq8_targets, target_draws
 from farsighter.agents.farsighter_posterior import RECENT_FEATURES, FarsighterCounters, make_head
 from farsighter.agents.learner import make_target_cache
 from farsighter.config import Config
 from farsighter.exploration import ThompsonExploration
+from farsighter.exploration.optimism import calibrated
 
 
 class SeedParts:

@@ -31,14 +31,12 @@ from farsighter.agents.common import (
 )
 from farsighter.agents.cuda_graph import Tensors
 from farsighter.agents.farsighter_loss import (
-    exploratory_actions,
     k_or_one_step,
     max_targets,
     one_step_batch,
     one_step_draws,
     one_step_inputs,
     q_taken,
-    records_exploratory,
     uses_one_step,
 )
 from farsighter.agents.farsighter_parts import SeedParts
@@ -49,6 +47,7 @@ from farsighter.agents.farsighter_posterior import (
 )
 from farsighter.agents.seed_members import FarsighterSeedMember, seed_replay, stack_refusal
 from farsighter.config import Config
+from farsighter.exploration.optimism import exploratory_actions, records_exploratory
 from farsighter.replay import Batch, VectorStep
 from farsighter.stacked import StackedQNetwork, clip_per_seed
 
@@ -117,21 +116,14 @@ class SeedBatchFarsighter:
             return np.stack([p.rng.integers(0, self.num_actions, size=n) for p in self.parts])
         with torch.no_grad():
             phi_SED = self.torso(obs_tensor(obs_SE, self.device))
-            actions_SE = torch.stack(
-                [
-                    p.exploration.q(phi_SED[s], obs_SE[s], p.gen).argmax(dim=1)
-                    for s, p in enumerate(self.parts)
-                ]
-            )
+            parts = list(enumerate(self.parts))
+            actions = [p.exploration.q(phi_SED[s], obs_SE[s], p.gen).argmax(1) for s, p in parts]
             if self.records:  # where a seed's draw chose otherwise than its mean would
-                margin = self.cfg.blr.cut_margin
+                m = self.cfg.blr.cut_margin
                 self.exploratory_SE = np.stack(
-                    [
-                        exploratory_actions(p.head, phi_SED[s], actions_SE[s], margin)
-                        for s, p in enumerate(self.parts)
-                    ]
+                    [exploratory_actions(p.head, phi_SED[s], actions[s], m) for s, p in parts]
                 )
-        return actions_SE.cpu().numpy()
+        return torch.stack(actions).cpu().numpy()
 
     def observe(self, steps: Sequence[VectorStep]) -> None:
         """One vector step of every seed, in seed order."""

@@ -1,0 +1,56 @@
+"""When the targets' optimism ends, and what the acting side records for the cut target.
+
+``blr.optimism = until-reward`` keeps the targets' optimism (a posterior draw at the next state,
+the larger of the k-step and the one-step target) until a run's first positive reward, then
+trains on calibrated targets (:func:`calibrated`). ``k_target = cut`` stops a k-step window
+before the first exploratory action (``ops.targets.nstep_returns``): the acting side flags
+those actions (:func:`exploratory_actions`) and the replay keeps the flag with the row.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+from typing import Literal
+
+import numpy as np
+import torch
+
+from farsighter.config import BLRConfig, Config
+from farsighter.ops.blr import BLRHead
+
+
+def calibrated(blr: BLRConfig, k_target: str) -> tuple[BLRConfig, Literal["k", "cut"]]:
+    """``blr.optimism = until-reward``'s targets after its switch: the posterior mean's, and the
+    k-step target alone (cut at exploratory actions where ``k_target`` or
+    ``blr.calibrated_k_target`` is cut)."""
+    cut = k_target == "cut" or blr.calibrated_k_target == "cut"
+    return dataclasses.replace(blr, target="mean"), "cut" if cut else "k"
+
+
+@torch.no_grad()
+def exploratory_actions(
+    head: BLRHead, phi_ED: torch.Tensor, actions_E: torch.Tensor, margin: float
+) -> np.ndarray:
+    """Which of the actions taken at features ``phi_ED`` were exploratory (``k_target = cut``):
+    not the posterior mean's greedy action, and (``margin`` > 0, ``blr.cut_margin``) with a mean
+    Q below the greedy action's by more than ``margin`` predictive sds of the difference."""
+    q_EA = phi_ED @ head.mean_AD.T
+    greedy_E = q_EA.argmax(dim=1)
+    differs_E = actions_E != greedy_E
+    if margin > 0 and bool(differs_E.any()):
+        rows = differs_E.nonzero()[:, 0]
+        phi, taken, greedy = phi_ED[rows], actions_E[rows], greedy_E[rows]
+        gap = q_EA[rows, greedy] - q_EA[rows, taken]
+        sd = (
+            head.predictive_var_action(phi, taken) + head.predictive_var_action(phi, greedy)
+        ).sqrt()
+        differs_E[rows] = gap > margin * sd
+    return differs_E.cpu().numpy()
+
+
+def records_exploratory(cfg: Config) -> bool:
+    """Whether a run records which of its actions were exploratory: it cuts k-step windows
+    before them (``k_target = cut``) now or after ``blr.optimism``'s switch."""
+    return cfg.k_target == "cut" or (
+        cfg.blr.optimism == "until-reward" and cfg.blr.calibrated_k_target == "cut"
+    )
