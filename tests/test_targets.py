@@ -55,16 +55,31 @@ def test_random_windows_match_a_step_by_step_reading() -> None:
         trunc = rng.random((400, k)) < 0.15
         ret, n, boot = nstep_returns(r, term, trunc, G)
         assert n.dtype == np.int64 and ret.dtype == boot.dtype == np.float32
-        for b in range(400):
-            total, steps = 0.0, 0
-            for j in range(k):
-                total += G**j * r[b, j]
-                steps += 1
-                if term[b, j] or trunc[b, j]:
-                    break
-            assert n[b] == steps
-            assert np.isclose(ret[b], total, rtol=1e-6, atol=1e-6)
-            assert boot[b] == np.float32(0.0 if term[b, steps - 1] else G**steps)
+        _check_step_by_step(r, term, trunc, np.zeros_like(term), (ret, n, boot))
+
+
+def _check_step_by_step(
+    r: np.ndarray,
+    term: np.ndarray,
+    trunc: np.ndarray,
+    cut: np.ndarray,
+    got: tuple[np.ndarray, np.ndarray, np.ndarray],
+) -> None:
+    """Each row's window read step by step: it stops before a cut step after the first, or
+    after a step that ends the episode; no bootstrap after a termination."""
+    ret, n, boot = got
+    for b in range(r.shape[0]):
+        total, steps = 0.0, 0
+        for j in range(r.shape[1]):
+            if j >= 1 and cut[b, j]:
+                break
+            total += G**j * r[b, j]
+            steps += 1
+            if term[b, j] or trunc[b, j]:
+                break
+        assert n[b] == steps
+        assert np.isclose(ret[b], total, rtol=1e-6, atol=1e-6)
+        assert boot[b] == np.float32(0.0 if term[b, steps - 1] else G**steps)
 
 
 def test_double_q_target_uses_online_argmax_and_target_value() -> None:
@@ -123,19 +138,7 @@ def test_cut_windows_stop_before_the_first_exploratory_step() -> None:
         term = rng.random((400, k)) < 0.1
         trunc = rng.random((400, k)) < 0.1
         cut = rng.random((400, k)) < 0.3
-        ret, n, boot = nstep_returns(r, term, trunc, G, cut)
-        for b in range(400):
-            total, steps = 0.0, 0
-            for j in range(k):
-                if j >= 1 and cut[b, j]:
-                    break
-                total += G**j * r[b, j]
-                steps += 1
-                if term[b, j] or trunc[b, j]:
-                    break
-            assert n[b] == steps
-            assert np.isclose(ret[b], total, rtol=1e-6, atol=1e-6)
-            assert boot[b] == np.float32(0.0 if term[b, steps - 1] else G**steps)
+        _check_step_by_step(r, term, trunc, cut, nstep_returns(r, term, trunc, G, cut))
         plain = nstep_returns(r, term, trunc, G)
         none = nstep_returns(r, term, trunc, G, np.zeros_like(cut))
         for a, c in zip(plain, none, strict=True):
