@@ -883,3 +883,51 @@ def test_cut_margin_flags_only_actions_the_posterior_is_sure_are_worse(tmp_path:
         assert np.array_equal(got, expected), margin
     counts = [exploratory_actions(agent.head, phi, actions, m).sum() for m in (0.0, 1.0, 3.0)]
     assert counts[0] > counts[1] > counts[2] > 0, counts  # the margin bites at each step
+
+
+def test_switch_restart_zeroes_the_statistics_at_the_switch_only(tmp_path: Path) -> None:
+    """blr.switch_restart: the incremental statistics of the optimistic targets are zeroed at the
+    switch (without it they carry over), the posterior refits from what comes after, and a
+    reload of a switched run keeps the statistics it saved (a restart on load would lose them)."""
+    values = {
+        "blr.mode": "incremental",
+        "blr.optimism": "until-reward",
+        "blr.switch_restart": True,
+        "k": 1,
+        "learning_starts": 0,
+        "batch_size": 4,
+        "train_every": 1,
+    }
+    obs = np.random.default_rng(0).normal(size=(1, 4)).astype(np.float32)
+
+    def step(agent: FarsighterAgent, reward: float, t: int) -> None:
+        action = agent.act(obs, t)
+        agent.observe(
+            VectorStep(obs, action, np.array([reward]), np.array([False]), np.array([False]), None)
+        )
+
+    agent = make_agent(tmp_path / "a", **values)
+    kept = make_agent(tmp_path / "b", **{**values, "blr.switch_restart": False})
+    for a in (agent, kept):
+        for t in range(12):
+            step(a, 0.0, t)
+            a.update()
+        assert float(a.head.count_A.sum()) > 0 and float(a.head.phiy_AD.abs().sum()) > 0
+        step(a, 1.0, 12)
+        assert a.loss.calibrated
+    assert float(agent.head.count_A.sum()) == 0 and float(agent.head.phiy_AD.abs().sum()) == 0
+    assert float(agent.head.phiphiT_ADD.abs().sum()) == 0
+    assert float(kept.head.count_A.sum()) > 0
+    for t in range(13, 16):
+        step(agent, 0.0, t)
+        assert agent.update() is not None
+    agent.refresh_posterior()
+    # the refit: the statistics of the steps since the switch alone, with the prior's width
+    # wherever they did not reach
+    assert float(agent.head.count_A.sum()) > 0
+    saved = {k: v.clone() for k, v in agent.head.state_dict().items() if torch.is_tensor(v)}
+    again = make_agent(tmp_path / "c", **values)
+    again.load_state_dict(agent.state_dict())
+    assert again.loss.calibrated
+    for key, value in saved.items():
+        torch.testing.assert_close(again.head.state_dict()[key], value, msg=key)

@@ -58,7 +58,11 @@ from farsighter.agents.learner import Learner, make_target_cache
 from farsighter.agents.protocol import AgentFactory
 from farsighter.config import Config
 from farsighter.exploration import ThompsonExploration
-from farsighter.exploration.optimism import exploratory_actions, records_exploratory
+from farsighter.exploration.optimism import (
+    exploratory_actions,
+    records_exploratory,
+    restart_at_switch,
+)
 from farsighter.replay import VectorStep
 
 
@@ -132,13 +136,17 @@ class FarsighterAgent:
         self.replay.add_step(step, self.exploratory_E if self.cut else None)
         if self.cfg.blr.optimism == "until-reward" and not self.loss.calibrated:
             if bool(np.any(np.asarray(step.reward_E) > 0)):
-                self.calibrate()
+                self.calibrate(restart=False)
         self.exploration.observe(np.logical_or(step.terminated_E, step.truncated_E))
 
-    def calibrate(self) -> None:
+    def calibrate(self, restart: bool = True) -> None:
         """``blr.optimism = until-reward``'s switch (:meth:`FarsighterLoss.calibrate`); the
-        replay cuts its windows from now on where the calibrated target is cut."""
+        replay cuts its windows from now on where the calibrated target is cut, and the
+        posterior restarts (``blr.switch_restart``; ``restart = False``: a checkpoint's
+        statistics, loaded, are kept)."""
         self.loss.calibrate()
+        if restart:
+            restart_at_switch(self.cfg, self.head)
         self.replay.cut_exploratory = self.loss.k_target == "cut"
 
     # ------------------------------------------------------------------ learning
@@ -256,7 +264,7 @@ class FarsighterAgent:
         load_state(self, self.SAVED, state)
         self.recent_phi.load_state_dict(state["recent_phi"])
         if state.get("calibrated", False) and not self.loss.calibrated:
-            self.calibrate()
+            self.calibrate(restart=False)
         # a checkpoint from before the exploration object holds its pieces under our own keys
         self.exploration.load_state_dict(state.get("exploration", state))
         # the target cache (cleared by the target's load) is kept when the checkpoint has it

@@ -18,7 +18,7 @@ from farsighter.agents.farsighter_posterior import RECENT_FEATURES, FarsighterCo
 from farsighter.agents.learner import make_target_cache
 from farsighter.config import Config
 from farsighter.exploration import ThompsonExploration
-from farsighter.exploration.optimism import calibrated
+from farsighter.exploration.optimism import calibrated, restart_at_switch
 
 
 class SeedParts:
@@ -42,10 +42,12 @@ class SeedParts:
         self.gen.manual_seed(cfg.seed + 3)
         self.cache = make_target_cache(cfg, device, dim)  # FarsighterLoss's, keyed by its streams
 
-    def calibrate(self) -> None:
-        """``blr.optimism = until-reward``'s switch (``FarsighterLoss.calibrate``)."""
+    def calibrate(self, restart: bool = True) -> None:
+        """``blr.optimism = until-reward``'s switch (``FarsighterAgent.calibrate``)."""
         self.calibrated = True
         self.blr, self.k_target = calibrated(self.blr, self.k_target)
+        if restart:
+            restart_at_switch(self.cfg, self.head)
 
     def draws(self, rows: int, one_step: bool) -> Tensors:
         """The targets' draws (``FarsighterAgent._draws``), from this seed's generator."""

@@ -134,11 +134,12 @@ class SeedBatchFarsighter:
                 self.calibrate(s)
             p.exploration.observe(np.logical_or(st.terminated_E, st.truncated_E))
 
-    def calibrate(self, s: int) -> None:
+    def calibrate(self, s: int, restart: bool = True) -> None:
         """Seed ``s``'s ``blr.optimism = until-reward`` switch (``FarsighterAgent.calibrate``):
-        its targets, and its streams' windows cut where its calibrated target is cut."""
+        its targets, its streams' windows cut where its calibrated target is cut, and its
+        posterior's restart."""
         p = self.parts[s]
-        p.calibrate()
+        p.calibrate(restart)
         self.replay.cut_E[self.replay.seed_streams(s)] = p.k_target == "cut"
 
     # ------------------------------------------------------------------ learning

@@ -204,7 +204,7 @@ class FarsighterSeedMember(Member):
             setattr(p.counters, key, value)
         p.recent_phi.load_state_dict(state["recent_phi"])
         if state.get("calibrated", False) and not p.calibrated:
-            b.calibrate(s)
+            b.calibrate(s, restart=False)
         p.exploration.load_state_dict(state.get("exploration", state))
         if p.cache is not None:  # the rows it keeps, when the checkpoint has them
             p.cache.load_state_dict(state.get("target_cache"))

@@ -48,6 +48,13 @@ def exploratory_actions(
     return differs_E.cpu().numpy()
 
 
+def restart_at_switch(cfg: Config, head: BLRHead) -> None:
+    """``blr.switch_restart``: the posterior's running statistics zeroed at the switch (the
+    posterior itself changes at the next refresh)."""
+    if cfg.blr.switch_restart and cfg.blr.mode == "incremental":
+        head.reset_statistics()
+
+
 def records_exploratory(cfg: Config) -> bool:
     """Whether a run records which of its actions were exploratory: it cuts k-step windows
     before them (``k_target = cut``) now or after ``blr.optimism``'s switch."""
