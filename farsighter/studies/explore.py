@@ -426,6 +426,9 @@ AGENTS: tuple[Agent, ...] = (
     ),
     # the cut only where the posterior is sure the action taken was worse (blr.cut_margin)
     Agent("Farsighter (cut margin 1)", "farsighter", {"blr.cut_margin": 1.0}),
+    # the posterior's statistics zeroed at the switch (blr.switch_restart): its mean fit to the
+    # calibrated targets alone, its width the prior's again where the run has not been since
+    Agent("Farsighter (switch restart)", "farsighter", {"blr.switch_restart": True}),
 )
 COLORS = {a.label: f"C{i}" for i, a in enumerate(AGENTS)}
 _NAMED_ONLY = (
@@ -451,6 +454,7 @@ _NAMED_ONLY = (
     "Farsighter (cut, optimism until reward)",
     "Farsighter (optimism until reward, then cut)",
     "Farsighter (cut margin 1)",
+    "Farsighter (switch restart)",
 )
 DEFAULT_AGENTS = tuple(a.label for a in AGENTS if a.label not in _NAMED_ONLY)
 """The default list: every agent once but those run only when named. "Farsighter (redraw k)" and
