@@ -886,13 +886,17 @@ def test_cut_margin_flags_only_actions_the_posterior_is_sure_are_worse(tmp_path:
 
 
 def test_switch_restart_zeroes_the_statistics_at_the_switch_only(tmp_path: Path) -> None:
-    """blr.switch_restart: the incremental statistics of the optimistic targets are zeroed at the
-    switch (without it they carry over), the posterior refits from what comes after, and a
-    reload of a switched run keeps the statistics it saved (a restart on load would lose them)."""
+    """blr.switch_restart: at the switch the posterior is its prior again (statistics zeroed,
+    mean 0 in the acting and the target mean, the configured widths after the residual scale
+    moved them); without it all carries over; the posterior refits from what comes after, and
+    a reload of a switched run keeps what it saved (a restart on load would lose it)."""
     values = {
         "blr.mode": "incremental",
         "blr.optimism": "until-reward",
         "blr.switch_restart": True,
+        "blr.scale": "residual",
+        "blr.noise_std": 1.0,
+        "blr.prior_std": 0.5,
         "k": 1,
         "learning_starts": 0,
         "batch_size": 4,
@@ -910,14 +914,23 @@ def test_switch_restart_zeroes_the_statistics_at_the_switch_only(tmp_path: Path)
     kept = make_agent(tmp_path / "b", **{**values, "blr.switch_restart": False})
     for a in (agent, kept):
         for t in range(12):
-            step(a, 0.0, t)
+            step(a, -8.0 * (t % 2), t)  # residuals that move sigma_eps off its floor
             a.update()
+        a.refresh_posterior()
         assert float(a.head.count_A.sum()) > 0 and float(a.head.phiy_AD.abs().sum()) > 0
+        assert a.head.noise_std > 1.0 and a.loss.target_mean_AD.any()
         step(a, 1.0, 12)
         assert a.loss.calibrated
     assert float(agent.head.count_A.sum()) == 0 and float(agent.head.phiy_AD.abs().sum()) == 0
     assert float(agent.head.phiphiT_ADD.abs().sum()) == 0
-    assert float(kept.head.count_A.sum()) > 0
+    # the prior: mean 0 (in the targets too), the configured widths
+    assert not agent.head.mean_AD.any() and not agent.loss.target_mean_AD.any()
+    assert (agent.head.noise_std, agent.head.prior_std) == (1.0, 0.5)
+    torch.testing.assert_close(
+        agent.head.cov_ADD,
+        0.25 * torch.eye(agent.head.dim, dtype=torch.float64).expand_as(agent.head.cov_ADD),
+    )
+    assert float(kept.head.count_A.sum()) > 0 and kept.loss.target_mean_AD.any()
     for t in range(13, 16):
         step(agent, 0.0, t)
         assert agent.update() is not None

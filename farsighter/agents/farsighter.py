@@ -136,7 +136,7 @@ class FarsighterAgent:
         self.replay.add_step(step, self.exploratory_E if self.cut else None)
         if self.cfg.blr.optimism == "until-reward" and not self.loss.calibrated:
             if bool(np.any(np.asarray(step.reward_E) > 0)):
-                self.calibrate(restart=False)
+                self.calibrate()
         self.exploration.observe(np.logical_or(step.terminated_E, step.truncated_E))
 
     def calibrate(self, restart: bool = True) -> None:
@@ -146,7 +146,7 @@ class FarsighterAgent:
         statistics, loaded, are kept)."""
         self.loss.calibrate()
         if restart:
-            restart_at_switch(self.cfg, self.head)
+            restart_at_switch(self.cfg, self.head, self.loss.target_mean_AD)
         self.replay.cut_exploratory = self.loss.k_target == "cut"
 
     # ------------------------------------------------------------------ learning

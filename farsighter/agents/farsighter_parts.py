@@ -47,7 +47,7 @@ class SeedParts:
         self.calibrated = True
         self.blr, self.k_target = calibrated(self.blr, self.k_target)
         if restart:
-            restart_at_switch(self.cfg, self.head)
+            restart_at_switch(self.cfg, self.head, self.target_mean_AD)
 
     def draws(self, rows: int, one_step: bool) -> Tensors:
         """The targets' draws (``FarsighterAgent._draws``), from this seed's generator."""

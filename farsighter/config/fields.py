@@ -81,11 +81,12 @@ class BLRConfig:
     exploratory action (``Config.k_target = cut``; the run records which actions were from its
     start). Our extension."""
     switch_restart: bool = False
-    """With ``optimism = until-reward`` and ``mode = incremental``: at the switch, zero the
-    posterior's running statistics, so its mean is fit to the calibrated targets alone (the
-    statistics never forget, and before the switch every target they hold carried the optimism
-    that the switch ends) and its width is the prior's again wherever the run has not been since.
-    False: the statistics carry over. Our extension."""
+    """With ``optimism = until-reward`` and ``mode = incremental``: at the switch the posterior
+    restarts from its prior (its running statistics zeroed, sigma_eps and the prior sigma as
+    configured, mean 0 at the prior's width) and the targets' mean with it, so the values that
+    the optimism inflated (a bonus for every step that does not end the episode) start again
+    from 0 instead of decaying by gamma per bootstrap; the learned features and the replay are
+    kept. False: the posterior carries over. Our extension."""
     cut_margin: float = 0.0
     """With ``Config.k_target = cut`` (now or after the switch): how sure the posterior must be
     that an action other than the mean's greedy one was worse before a window is cut there: its

@@ -48,11 +48,13 @@ def exploratory_actions(
     return differs_E.cpu().numpy()
 
 
-def restart_at_switch(cfg: Config, head: BLRHead) -> None:
-    """``blr.switch_restart``: the posterior's running statistics zeroed at the switch (the
-    posterior itself changes at the next refresh)."""
+def restart_at_switch(cfg: Config, head: BLRHead, target_mean_AD: torch.Tensor) -> None:
+    """``blr.switch_restart``: the posterior back to its prior at the switch
+    (:meth:`BLRHead.restart`) and the targets' mean with it, so every value the optimism
+    inflated starts again from 0."""
     if cfg.blr.switch_restart and cfg.blr.mode == "incremental":
-        head.reset_statistics()
+        head.restart()
+        target_mean_AD.copy_(head.mean_AD)
 
 
 def records_exploratory(cfg: Config) -> bool:

@@ -284,6 +284,14 @@ class BLRHead:
         self.count_A.zero_()
         self.yy_A.zero_()
 
+    def restart(self) -> None:
+        """Back to the prior: the statistics zeroed, the configured sigma_eps and prior sigma
+        (which ``scale = residual`` moves), and the posterior refreshed from them (mean 0, the
+        prior's width)."""
+        self.reset_statistics()
+        self.noise_std, self.prior_std = self.noise_floor, self.prior_ratio * self.noise_floor
+        self.refresh()
+
     @torch.no_grad()
     def accumulate(
         self,
