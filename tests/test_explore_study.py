@@ -215,6 +215,7 @@ def test_agents_are_one_config_each_on_the_auto_preset(tmp_path: Path) -> None:
         "Farsighter (optimism until reward, then cut)",
         "Farsighter (cut margin 1)",
         "Farsighter (switch restart)",
+        "Farsighter (switch restart, k-step)",
     ]
     by = {a.label: a for a in AGENTS}
     # the default list trains no config twice, and leaves out the variants run only when named
@@ -242,10 +243,11 @@ def test_agents_are_one_config_each_on_the_auto_preset(tmp_path: Path) -> None:
         "Farsighter (optimism until reward, then cut)",
         "Farsighter (cut margin 1)",
         "Farsighter (switch restart)",
+        "Farsighter (switch restart, k-step)",
     }
     assert not named_only & set(StudyConfig().agents)
     assert "Farsighter (redraw step)" in StudyConfig().agents
-    assert len(StudyConfig().agents) == len(AGENTS) - 23
+    assert len(StudyConfig().agents) == len(AGENTS) - 24
     every = [
         run_config(a, QUICK, 3, tmp_path, (chain_id(10), 10_000))
         for a in AGENTS

@@ -109,6 +109,20 @@ def _files(run: Path) -> dict[str, list[str]]:
                 "batch_size": 24,
             },
         ),
+        # the switch with the posterior restarted from its prior (each seed's own head and
+        # target mean) and the plain k-step target after it
+        (
+            "farsighter",
+            "farsighter/Chain8-v0",
+            {
+                "preset": "general",
+                "blr__switch_restart": True,
+                "blr__calibrated_k_target": "k",
+                "k": 3,
+                "learning_starts": 100,
+                "batch_size": 24,
+            },
+        ),
         # windows cut before exploratory actions from the start
         ("farsighter", "farsighter/DeepSea6-v0", {"preset": "general", "k_target": "cut", "k": 3}),
         # RND: each seed's bonus (its networks, Adam, whitening and reward statistics)
@@ -142,7 +156,7 @@ def test_a_seed_in_a_batch_trains_as_it_does_alone(
         for name in ("policy.pt", "checkpoint.pt"):
             _same_states(_agent_state(alone_dir / name), _agent_state(batch_dir / name))
         assert _files(alone_dir) == _files(batch_dir)
-    if values.get("blr__optimism") == "until-reward":  # the switch happened, seed by seed
+    if {"blr__optimism", "blr__switch_restart"} & values.keys():  # each seed switched on its own
         steps = [
             _agent_state(tmp_path / "batch" / f"s{seed}" / "checkpoint.pt")["calibrated"]
             for seed in SEEDS

@@ -429,6 +429,11 @@ AGENTS: tuple[Agent, ...] = (
     # the posterior's statistics zeroed at the switch (blr.switch_restart): its mean fit to the
     # calibrated targets alone, its width the prior's again where the run has not been since
     Agent("Farsighter (switch restart)", "farsighter", {"blr.switch_restart": True}),
+    Agent(
+        "Farsighter (switch restart, k-step)",
+        "farsighter",
+        {"blr.switch_restart": True, "blr.calibrated_k_target": "k"},
+    ),
 )
 COLORS = {a.label: f"C{i}" for i, a in enumerate(AGENTS)}
 _NAMED_ONLY = (
@@ -455,6 +460,7 @@ _NAMED_ONLY = (
     "Farsighter (optimism until reward, then cut)",
     "Farsighter (cut margin 1)",
     "Farsighter (switch restart)",
+    "Farsighter (switch restart, k-step)",
 )
 DEFAULT_AGENTS = tuple(a.label for a in AGENTS if a.label not in _NAMED_ONLY)
 """The default list: every agent once but those run only when named. "Farsighter (redraw k)" and
