@@ -216,6 +216,7 @@ def test_agents_are_one_config_each_on_the_auto_preset(tmp_path: Path) -> None:
         "Farsighter (cut margin 1)",
         "Farsighter (switch restart)",
         "Farsighter (switch restart, k-step)",
+        "Farsighter (switch restart, cut margin 1)",
     ]
     by = {a.label: a for a in AGENTS}
     # the default list trains no config twice, and leaves out the variants run only when named
@@ -244,10 +245,11 @@ def test_agents_are_one_config_each_on_the_auto_preset(tmp_path: Path) -> None:
         "Farsighter (cut margin 1)",
         "Farsighter (switch restart)",
         "Farsighter (switch restart, k-step)",
+        "Farsighter (switch restart, cut margin 1)",
     }
     assert not named_only & set(StudyConfig().agents)
     assert "Farsighter (redraw step)" in StudyConfig().agents
-    assert len(StudyConfig().agents) == len(AGENTS) - 24
+    assert len(StudyConfig().agents) == len(AGENTS) - 25
     every = [
         run_config(a, QUICK, 3, tmp_path, (chain_id(10), 10_000))
         for a in AGENTS

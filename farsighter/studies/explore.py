@@ -434,6 +434,11 @@ AGENTS: tuple[Agent, ...] = (
         "farsighter",
         {"blr.switch_restart": True, "blr.calibrated_k_target": "k"},
     ),
+    Agent(
+        "Farsighter (switch restart, cut margin 1)",
+        "farsighter",
+        {"blr.switch_restart": True, "blr.cut_margin": 1.0},
+    ),
 )
 COLORS = {a.label: f"C{i}" for i, a in enumerate(AGENTS)}
 _NAMED_ONLY = (
@@ -461,6 +466,7 @@ _NAMED_ONLY = (
     "Farsighter (cut margin 1)",
     "Farsighter (switch restart)",
     "Farsighter (switch restart, k-step)",
+    "Farsighter (switch restart, cut margin 1)",
 )
 DEFAULT_AGENTS = tuple(a.label for a in AGENTS if a.label not in _NAMED_ONLY)
 """The default list: every agent once but those run only when named. "Farsighter (redraw k)" and
