@@ -385,6 +385,35 @@ ENTRIES = (
         255,
     ),
     Entry(
+        "explore/restart-doorkey5",
+        "explore --families doorkey --sizes 5 --seeds 2 3 --agents "
+        "'Farsighter (switch restart)' --workers 2 --seeds-per-batch 1",
+        "the posterior restarted at the switch, then the cut target, on DoorKey-5x5 (the two "
+        "seeds that switch)",
+        459,
+    ),
+    Entry(
+        "explore/restart-margin-doorkey5",
+        "explore --families doorkey --sizes 5 --seeds 2 3 --agents "
+        "'Farsighter (switch restart, cut margin 1)' --workers 2 --seeds-per-batch 1",
+        "the restart with the cut at margin 1 on DoorKey-5x5 (the two seeds that switch)",
+        445,
+    ),
+    Entry(
+        "explore/restart-chain30",
+        "explore --families chain --sizes 30 --seeds 1 2 3 4 5 --agents "
+        "'Farsighter (switch restart)' 'Farsighter (switch restart, k-step)' --workers 2",
+        "the restart with the cut and with the plain k-step target after it, chain L = 30",
+        235,
+    ),
+    Entry(
+        "explore/restart-margin-chain30",
+        "explore --families chain --sizes 30 --seeds 1 2 3 4 5 --agents "
+        "'Farsighter (switch restart, cut margin 1)' --workers 2",
+        "the restart with the cut at margin 1, chain L = 30",
+        176,
+    ),
+    Entry(
         "minatar",
         "atari --games minatar --agents DDQN BDQN Farsighter --seeds 1 2 --steps 50000 "
         "--eval-every 10000 --eval-episodes 10",

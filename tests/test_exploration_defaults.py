@@ -893,7 +893,7 @@ def test_switch_restart_zeroes_the_statistics_at_the_switch_only(tmp_path: Path)
     values = {
         "blr.mode": "incremental",
         "blr.optimism": "until-reward",
-        "blr.switch_restart": True,
+        "blr.switch_restart": "prior",
         "blr.scale": "residual",
         "blr.noise_std": 1.0,
         "blr.prior_std": 0.5,
@@ -911,7 +911,7 @@ def test_switch_restart_zeroes_the_statistics_at_the_switch_only(tmp_path: Path)
         )
 
     agent = make_agent(tmp_path / "a", **values)
-    kept = make_agent(tmp_path / "b", **{**values, "blr.switch_restart": False})
+    kept = make_agent(tmp_path / "b", **{**values, "blr.switch_restart": "none"})
     for a in (agent, kept):
         for t in range(12):
             step(a, -8.0 * (t % 2), t)  # residuals that move sigma_eps off its floor
@@ -944,3 +944,44 @@ def test_switch_restart_zeroes_the_statistics_at_the_switch_only(tmp_path: Path)
     assert again.loss.calibrated
     for key, value in saved.items():
         torch.testing.assert_close(again.head.state_dict()[key], value, msg=key)
+
+
+def test_switch_restart_zero_targets_keeps_the_rows_and_drops_their_targets(
+    tmp_path: Path,
+) -> None:
+    """blr.switch_restart zero-targets: at the switch the sums of the targets are zeroed and the
+    rows' sums kept, so the posterior mean (acting and target) is 0 and its covariance is the one
+    those rows made; the first refresh after adds only the new targets."""
+    values = {
+        "blr.mode": "incremental",
+        "blr.optimism": "until-reward",
+        "blr.switch_restart": "zero-targets",
+        "k": 1,
+        "learning_starts": 0,
+        "batch_size": 4,
+        "train_every": 1,
+    }
+    obs = np.random.default_rng(1).normal(size=(1, 4)).astype(np.float32)
+    agent = make_agent(tmp_path / "a", **values)
+    for t in range(13):
+        action = agent.act(obs, t)
+        reward = 1.0 if t == 12 else -2.0 * (t % 2)
+        if t == 12:
+            rows = agent.head.phiphiT_ADD.clone()
+            agent.refresh_posterior()
+            cov, noise = agent.head.cov_ADD.clone(), agent.head.noise_std
+            assert agent.head.mean_AD.any()
+        agent.observe(
+            VectorStep(obs, action, np.array([reward]), np.array([False]), np.array([False]), None)
+        )
+        if t < 12:
+            agent.update()
+    assert agent.loss.calibrated
+    assert not agent.head.phiy_AD.any() and not agent.head.yy_A.any()
+    torch.testing.assert_close(agent.head.phiphiT_ADD, rows)
+    assert not agent.head.mean_AD.any() and not agent.loss.target_mean_AD.any()
+    # the width the rows made (Cov = sigma_eps^2 (rows + I / ratio^2)^-1; the residual scale of
+    # the zero targets moves sigma_eps alone)
+    torch.testing.assert_close(
+        agent.head.cov_ADD / agent.head.noise_std**2, cov / noise**2, rtol=1e-6, atol=1e-9
+    )

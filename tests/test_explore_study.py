@@ -217,6 +217,8 @@ def test_agents_are_one_config_each_on_the_auto_preset(tmp_path: Path) -> None:
         "Farsighter (switch restart)",
         "Farsighter (switch restart, k-step)",
         "Farsighter (switch restart, cut margin 1)",
+        "Farsighter (zero targets)",
+        "Farsighter (zero targets, cut margin 1)",
     ]
     by = {a.label: a for a in AGENTS}
     # the default list trains no config twice, and leaves out the variants run only when named
@@ -246,10 +248,12 @@ def test_agents_are_one_config_each_on_the_auto_preset(tmp_path: Path) -> None:
         "Farsighter (switch restart)",
         "Farsighter (switch restart, k-step)",
         "Farsighter (switch restart, cut margin 1)",
+        "Farsighter (zero targets)",
+        "Farsighter (zero targets, cut margin 1)",
     }
     assert not named_only & set(StudyConfig().agents)
     assert "Farsighter (redraw step)" in StudyConfig().agents
-    assert len(StudyConfig().agents) == len(AGENTS) - 25
+    assert len(StudyConfig().agents) == len(AGENTS) - 27
     every = [
         run_config(a, QUICK, 3, tmp_path, (chain_id(10), 10_000))
         for a in AGENTS

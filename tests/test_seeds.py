@@ -116,7 +116,7 @@ def _files(run: Path) -> dict[str, list[str]]:
             "farsighter/Chain8-v0",
             {
                 "preset": "general",
-                "blr__switch_restart": True,
+                "blr__switch_restart": "prior",
                 "blr__calibrated_k_target": "k",
                 "k": 3,
                 "learning_starts": 100,

@@ -80,13 +80,16 @@ class BLRConfig:
     5/5, held 1/5, docs/results/explore/until-reward). cut: the return stopped before the first
     exploratory action (``Config.k_target = cut``; the run records which actions were from its
     start). Our extension."""
-    switch_restart: bool = False
-    """With ``optimism = until-reward`` and ``mode = incremental``: at the switch the posterior
-    restarts from its prior (its running statistics zeroed, sigma_eps and the prior sigma as
-    configured, mean 0 at the prior's width) and the targets' mean with it, so the values that
-    the optimism inflated (a bonus for every step that does not end the episode) start again
-    from 0 instead of decaying by gamma per bootstrap; the learned features and the replay are
-    kept. False: the posterior carries over. Our extension."""
+    switch_restart: Literal["none", "prior", "zero-targets"] = "none"
+    """With ``optimism = until-reward`` and ``mode = incremental``: what the posterior keeps of
+    the optimistic targets at the switch. Its running statistics never forget, and every target
+    they hold from before the switch carried the optimism (a bonus for every step that does not
+    end the episode), which calibrated targets would otherwise work off at gamma per bootstrap.
+    none: all of it. prior: nothing, the posterior restarts from its prior (statistics zeroed,
+    sigma_eps and the prior sigma as configured, mean 0 at the prior's width) and the targets'
+    mean with it. zero-targets: the rows but not their targets (the sums of y set to 0, as if
+    every earlier target had been 0), so the mean restarts at 0 and the width stays what the
+    rows made it. The learned features and the replay are kept in every case. Our extension."""
     cut_margin: float = 0.0
     """With ``Config.k_target = cut`` (now or after the switch): how sure the posterior must be
     that an action other than the mean's greedy one was worse before a window is cut there: its

@@ -49,12 +49,19 @@ def exploratory_actions(
 
 
 def restart_at_switch(cfg: Config, head: BLRHead, target_mean_AD: torch.Tensor) -> None:
-    """``blr.switch_restart``: the posterior back to its prior at the switch
-    (:meth:`BLRHead.restart`) and the targets' mean with it, so every value the optimism
-    inflated starts again from 0."""
-    if cfg.blr.switch_restart and cfg.blr.mode == "incremental":
+    """``blr.switch_restart`` at the switch: the posterior back to its prior
+    (:meth:`BLRHead.restart`, ``prior``) or its targets' sums zeroed and refreshed (``zero-targets``:
+    mean 0, the width kept), and the targets' mean with it, so every value the optimism inflated
+    starts again from 0."""
+    if cfg.blr.switch_restart == "none" or cfg.blr.mode != "incremental":
+        return
+    if cfg.blr.switch_restart == "prior":
         head.restart()
-        target_mean_AD.copy_(head.mean_AD)
+    else:
+        head.phiy_AD.zero_()
+        head.yy_A.zero_()
+        head.refresh()
+    target_mean_AD.copy_(head.mean_AD)
 
 
 def records_exploratory(cfg: Config) -> bool:

@@ -426,18 +426,25 @@ AGENTS: tuple[Agent, ...] = (
     ),
     # the cut only where the posterior is sure the action taken was worse (blr.cut_margin)
     Agent("Farsighter (cut margin 1)", "farsighter", {"blr.cut_margin": 1.0}),
-    # the posterior's statistics zeroed at the switch (blr.switch_restart): its mean fit to the
-    # calibrated targets alone, its width the prior's again where the run has not been since
-    Agent("Farsighter (switch restart)", "farsighter", {"blr.switch_restart": True}),
+    # the posterior restarted from its prior at the switch (blr.switch_restart prior): its mean
+    # fit to the calibrated targets alone, its width the prior's again where the run has not been
+    # since; or its targets zeroed (zero-targets): the mean from 0, the width kept
+    Agent("Farsighter (switch restart)", "farsighter", {"blr.switch_restart": "prior"}),
     Agent(
         "Farsighter (switch restart, k-step)",
         "farsighter",
-        {"blr.switch_restart": True, "blr.calibrated_k_target": "k"},
+        {"blr.switch_restart": "prior", "blr.calibrated_k_target": "k"},
     ),
     Agent(
         "Farsighter (switch restart, cut margin 1)",
         "farsighter",
-        {"blr.switch_restart": True, "blr.cut_margin": 1.0},
+        {"blr.switch_restart": "prior", "blr.cut_margin": 1.0},
+    ),
+    Agent("Farsighter (zero targets)", "farsighter", {"blr.switch_restart": "zero-targets"}),
+    Agent(
+        "Farsighter (zero targets, cut margin 1)",
+        "farsighter",
+        {"blr.switch_restart": "zero-targets", "blr.cut_margin": 1.0},
     ),
 )
 COLORS = {a.label: f"C{i}" for i, a in enumerate(AGENTS)}
@@ -467,6 +474,8 @@ _NAMED_ONLY = (
     "Farsighter (switch restart)",
     "Farsighter (switch restart, k-step)",
     "Farsighter (switch restart, cut margin 1)",
+    "Farsighter (zero targets)",
+    "Farsighter (zero targets, cut margin 1)",
 )
 DEFAULT_AGENTS = tuple(a.label for a in AGENTS if a.label not in _NAMED_ONLY)
 """The default list: every agent once but those run only when named. "Farsighter (redraw k)" and
