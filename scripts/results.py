@@ -414,6 +414,21 @@ ENTRIES = (
         176,
     ),
     Entry(
+        "explore/zero-doorkey5",
+        "explore --families doorkey --sizes 5 --seeds 2 3 --agents 'Farsighter (zero targets)' "
+        "'Farsighter (zero targets, cut margin 1)' --workers 2 --seeds-per-batch 1",
+        "the optimistic targets zeroed at the switch (the rows kept), with the cut at margin 0 "
+        "and 1, on DoorKey-5x5 (the two seeds that switch)",
+        898,
+    ),
+    Entry(
+        "explore/zero-chain30",
+        "explore --families chain --sizes 30 --seeds 1 2 3 4 5 --agents "
+        "'Farsighter (zero targets)' 'Farsighter (zero targets, cut margin 1)' --workers 2",
+        "the optimistic targets zeroed at the switch, cut at margin 0 and 1, chain L = 30",
+        265,
+    ),
+    Entry(
         "minatar",
         "atari --games minatar --agents DDQN BDQN Farsighter --seeds 1 2 --steps 50000 "
         "--eval-every 10000 --eval-episodes 10",
