@@ -862,7 +862,7 @@ def test_cut_margin_flags_only_actions_the_posterior_is_sure_are_worse(tmp_path:
     """blr.cut_margin m: an action other than the mean's greedy one is flagged only where its
     mean Q is below the greedy's by more than m sds of the difference (the variances read from
     every action's predictive variance, another code path); m = 0 flags every difference."""
-    from farsighter.exploration.optimism import exploratory_actions
+    from farsighter.exploration.optimism import cut_relative, exploratory_actions
 
     agent = make_agent(tmp_path / "a", **{"k_target": "cut", "k": 3})
     g = torch.Generator().manual_seed(1)
@@ -883,6 +883,22 @@ def test_cut_margin_flags_only_actions_the_posterior_is_sure_are_worse(tmp_path:
         assert np.array_equal(got, expected), margin
     counts = [exploratory_actions(agent.head, phi, actions, m).sum() for m in (0.0, 1.0, 3.0)]
     assert counts[0] > counts[1] > counts[2] > 0, counts  # the margin bites at each step
+    # blr.cut_delay: the gap against d (1 - gamma) |Q_greedy|, alone and with a margin
+    best = q[rows, greedy]
+    for delay, margin in ((2.0, 0.0), (20.0, 0.0), (20.0, 1.0)):
+        rel = delay * (1 - agent.cfg.gamma)
+        expected = (actions != greedy) & (gap > rel * best.abs())
+        if margin:
+            expected &= gap > margin * sd
+        got = exploratory_actions(agent.head, phi, actions, margin, rel)
+        assert np.array_equal(got, expected.numpy()), (delay, margin)
+    by_delay = [
+        exploratory_actions(agent.head, phi, actions, 0.0, d * (1 - agent.cfg.gamma)).sum()
+        for d in (0.0, 20.0, 100.0)
+    ]
+    assert by_delay[0] > by_delay[1] > by_delay[2] > 0, by_delay  # the delay bites at each step
+    cfg = dataclasses.replace(agent.cfg, blr=dataclasses.replace(agent.cfg.blr, cut_delay=3.0))
+    assert cut_relative(cfg) == pytest.approx(3.0 * (1 - cfg.gamma))
 
 
 def test_switch_restart_zeroes_the_statistics_at_the_switch_only(tmp_path: Path) -> None:

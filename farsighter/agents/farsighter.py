@@ -59,6 +59,7 @@ from farsighter.agents.protocol import AgentFactory
 from farsighter.config import Config
 from farsighter.exploration import ThompsonExploration
 from farsighter.exploration.optimism import (
+    cut_relative,
     exploratory_actions,
     records_exploratory,
     restart_at_switch,
@@ -121,7 +122,7 @@ class FarsighterAgent:
             actions_E = q_EA.argmax(dim=1)
             if explore and self.cut:  # the draw chose otherwise than the mean would
                 self.exploratory_E = exploratory_actions(
-                    self.head, phi_ED, actions_E, self.cfg.blr.cut_margin
+                    self.head, phi_ED, actions_E, self.cfg.blr.cut_margin, cut_relative(self.cfg)
                 )
         return actions_E.cpu().numpy()
 

@@ -47,7 +47,11 @@ from farsighter.agents.farsighter_posterior import (
 )
 from farsighter.agents.seed_members import FarsighterSeedMember, seed_replay, stack_refusal
 from farsighter.config import Config
-from farsighter.exploration.optimism import exploratory_actions, records_exploratory
+from farsighter.exploration.optimism import (
+    cut_relative,
+    exploratory_actions,
+    records_exploratory,
+)
 from farsighter.replay import Batch, VectorStep
 from farsighter.stacked import StackedQNetwork, clip_per_seed
 
@@ -119,9 +123,9 @@ class SeedBatchFarsighter:
             parts = list(enumerate(self.parts))
             actions = [p.exploration.q(phi_SED[s], obs_SE[s], p.gen).argmax(1) for s, p in parts]
             if self.records:  # where a seed's draw chose otherwise than its mean would
-                m = self.cfg.blr.cut_margin
+                m, rel = self.cfg.blr.cut_margin, cut_relative(self.cfg)
                 self.exploratory_SE = np.stack(
-                    [exploratory_actions(p.head, phi_SED[s], actions[s], m) for s, p in parts]
+                    [exploratory_actions(p.head, phi_SED[s], actions[s], m, rel) for s, p in parts]
                 )
         return torch.stack(actions).cpu().numpy()
 

@@ -102,6 +102,14 @@ class BLRConfig:
     every draw differs from the mean somewhere and the windows shrink to one step; a margin
     keeps the k-step return there and cuts where a move is clearly wrong (the chain's). Our
     extension."""
+    cut_delay: float = 0.0
+    """With ``Config.k_target = cut`` (now or after the switch): cut a window only where the action
+    taken costs more than this many steps of delay, its mean Q below the greedy action's by
+    more than cut_delay (1 - gamma) |Q_greedy| (a step's delay costs (1 - gamma) V). In a room
+    a wrong turn costs a step or two, which at gamma = 0.99 is a gap of about 0.01 V, below
+    what the values resolve, and cutting there shrinks every window to a step; a move that
+    ends the episode short of the reward (the chain's) costs all of V and is cut at once. 0:
+    wherever the draw and the mean differ (with ``cut_margin`` 0, Watkins). Our extension."""
     target_noise_scale: float = 1.0
     """With target = sample or sample-greedy: a factor on the draw added to the next state's value
     (1: the posterior's own width). The draw's upward bias (the largest of the actions' draws,
@@ -157,6 +165,10 @@ class BLRConfig:
             (
                 self.cut_margin >= 0 and math.isfinite(self.cut_margin),
                 f"blr.cut_margin must be a finite number >= 0 (got {self.cut_margin})",
+            ),
+            (
+                self.cut_delay >= 0 and math.isfinite(self.cut_delay),
+                f"blr.cut_delay must be a finite number >= 0 (got {self.cut_delay})",
             ),
             (
                 self.target_noise_scale >= 0 and math.isfinite(self.target_noise_scale),

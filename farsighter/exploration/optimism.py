@@ -29,23 +29,37 @@ def calibrated(blr: BLRConfig, k_target: str) -> tuple[BLRConfig, Literal["k", "
 
 @torch.no_grad()
 def exploratory_actions(
-    head: BLRHead, phi_ED: torch.Tensor, actions_E: torch.Tensor, margin: float
+    head: BLRHead,
+    phi_ED: torch.Tensor,
+    actions_E: torch.Tensor,
+    margin: float,
+    relative: float = 0.0,
 ) -> np.ndarray:
     """Which of the actions taken at features ``phi_ED`` were exploratory (``k_target = cut``):
     not the posterior mean's greedy action, and (``margin`` > 0, ``blr.cut_margin``) with a mean
-    Q below the greedy action's by more than ``margin`` predictive sds of the difference."""
+    Q below the greedy action's by more than ``margin`` predictive sds of the difference, and
+    (``relative`` > 0: ``blr.cut_delay`` (1 - gamma)) by more than ``relative`` |Q_greedy|."""
     q_EA = phi_ED @ head.mean_AD.T
     greedy_E = q_EA.argmax(dim=1)
     differs_E = actions_E != greedy_E
-    if margin > 0 and bool(differs_E.any()):
+    if (margin > 0 or relative > 0) and bool(differs_E.any()):
         rows = differs_E.nonzero()[:, 0]
         phi, taken, greedy = phi_ED[rows], actions_E[rows], greedy_E[rows]
-        gap = q_EA[rows, greedy] - q_EA[rows, taken]
-        sd = (
-            head.predictive_var_action(phi, taken) + head.predictive_var_action(phi, greedy)
-        ).sqrt()
-        differs_E[rows] = gap > margin * sd
+        best = q_EA[rows, greedy]
+        gap = best - q_EA[rows, taken]
+        sure = gap > relative * best.abs()
+        if margin > 0:
+            sd = (
+                head.predictive_var_action(phi, taken) + head.predictive_var_action(phi, greedy)
+            ).sqrt()
+            sure &= gap > margin * sd
+        differs_E[rows] = sure
     return differs_E.cpu().numpy()
+
+
+def cut_relative(cfg: Config) -> float:
+    """``blr.cut_delay`` as a share of the greedy value: a step's delay costs (1 - gamma) V."""
+    return cfg.blr.cut_delay * (1.0 - cfg.gamma)
 
 
 def restart_at_switch(cfg: Config, head: BLRHead, target_mean_AD: torch.Tensor) -> None:

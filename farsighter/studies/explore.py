@@ -446,6 +446,12 @@ AGENTS: tuple[Agent, ...] = (
         "farsighter",
         {"blr.switch_restart": "zero-targets", "blr.cut_margin": 1.0},
     ),
+    # the cut only where the action taken costs more than 3 steps of delay (blr.cut_delay)
+    Agent(
+        "Farsighter (zero targets, cut delay 3)",
+        "farsighter",
+        {"blr.switch_restart": "zero-targets", "blr.cut_delay": 3.0},
+    ),
 )
 COLORS = {a.label: f"C{i}" for i, a in enumerate(AGENTS)}
 _NAMED_ONLY = (
@@ -476,6 +482,7 @@ _NAMED_ONLY = (
     "Farsighter (switch restart, cut margin 1)",
     "Farsighter (zero targets)",
     "Farsighter (zero targets, cut margin 1)",
+    "Farsighter (zero targets, cut delay 3)",
 )
 DEFAULT_AGENTS = tuple(a.label for a in AGENTS if a.label not in _NAMED_ONLY)
 """The default list: every agent once but those run only when named. "Farsighter (redraw k)" and
