@@ -429,6 +429,42 @@ ENTRIES = (
         265,
     ),
     Entry(
+        "explore/delay-chain30",
+        "explore --families chain --sizes 30 --seeds 1 2 3 4 5 --agents "
+        "'Farsighter (zero targets, cut delay 3)' --workers 2",
+        "the targets zeroed at the switch, then the cut only past 3 steps of delay, chain L = 30",
+        157,
+    ),
+    Entry(
+        "explore/delay-doorkey5",
+        "explore --families doorkey --sizes 5 --seeds 2 3 --agents "
+        "'Farsighter (zero targets, cut delay 3)' --workers 2 --seeds-per-batch 1",
+        "the targets zeroed at the switch, then the cut only past 3 steps of delay, DoorKey-5x5 "
+        "(the two seeds that switch)",
+        400,
+    ),
+    Entry(
+        "explore/delay-deepsea20",
+        "explore --families deepsea --sizes 20 --seeds 1 2 3 4 5 --agents "
+        "'Farsighter (zero targets, cut delay 3)' --workers 2",
+        "the targets zeroed at the switch and the cut past 3 steps of delay, deep sea N = 20",
+        400,
+    ),
+    Entry(
+        "explore/delay-frozenlake",
+        "explore --families frozenlake --sizes 4 --seeds 1 2 3 4 5 --agents "
+        "'Farsighter (zero targets, cut delay 3)' --workers 2",
+        "the same on FrozenLake 4x4",
+        326,
+    ),
+    Entry(
+        "explore/delay-empty5",
+        "explore --families empty --sizes 5 --seeds 1 2 3 --agents "
+        "'Farsighter (zero targets, cut delay 3)' --workers 2",
+        "the same on MiniGrid Empty-5x5",
+        366,
+    ),
+    Entry(
         "minatar",
         "atari --games minatar --agents DDQN BDQN Farsighter --seeds 1 2 --steps 50000 "
         "--eval-every 10000 --eval-episodes 10",

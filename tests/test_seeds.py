@@ -123,8 +123,13 @@ def _files(run: Path) -> dict[str, list[str]]:
                 "batch_size": 24,
             },
         ),
-        # windows cut before exploratory actions from the start
-        ("farsighter", "farsighter/DeepSea6-v0", {"preset": "general", "k_target": "cut", "k": 3}),
+        # windows cut before exploratory actions from the start, where they cost more than two
+        # steps of delay (the Chain8 case above cuts at every one)
+        (
+            "farsighter",
+            "farsighter/DeepSea6-v0",
+            {"preset": "general", "k_target": "cut", "k": 3, "blr__cut_delay": 2.0},
+        ),
         # RND: each seed's bonus (its networks, Adam, whitening and reward statistics)
         ("rnd", "CartPole-v1", {"preset": "general"}),
         # k-step intrinsic returns over windows cut by episode ends, two envs a seed
