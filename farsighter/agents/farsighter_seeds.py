@@ -47,11 +47,7 @@ from farsighter.agents.farsighter_posterior import (
 )
 from farsighter.agents.seed_members import FarsighterSeedMember, seed_replay, stack_refusal
 from farsighter.config import Config
-from farsighter.exploration.optimism import (
-    cut_relative,
-    exploratory_actions,
-    records_exploratory,
-)
+from farsighter.exploration.optimism import cut_relative, exploratory_actions, records_exploratory
 from farsighter.replay import Batch, VectorStep
 from farsighter.stacked import StackedQNetwork, clip_per_seed
 
