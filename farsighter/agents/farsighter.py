@@ -63,6 +63,7 @@ from farsighter.exploration.optimism import (
     exploratory_actions,
     records_exploratory,
     restart_at_switch,
+    switches_now,
 )
 from farsighter.replay import VectorStep
 
@@ -135,9 +136,8 @@ class FarsighterAgent:
 
     def observe(self, step: VectorStep) -> None:
         self.replay.add_step(step, self.exploratory_E if self.cut else None)
-        if self.cfg.blr.optimism == "until-reward" and not self.loss.calibrated:
-            if bool(np.any(np.asarray(step.reward_E) > 0)):
-                self.calibrate()
+        if switches_now(self.cfg, self.loss.calibrated, step.reward_E):
+            self.calibrate()
         self.exploration.observe(np.logical_or(step.terminated_E, step.truncated_E))
 
     def calibrate(self, restart: bool = True) -> None:

@@ -47,7 +47,7 @@ from farsighter.agents.farsighter_posterior import (
 )
 from farsighter.agents.seed_members import FarsighterSeedMember, seed_replay, stack_refusal
 from farsighter.config import Config
-from farsighter.exploration.optimism import cut_relative, exploratory_actions, records_exploratory
+from farsighter.exploration import optimism
 from farsighter.replay import Batch, VectorStep
 from farsighter.stacked import StackedQNetwork, clip_per_seed
 
@@ -98,7 +98,7 @@ class SeedBatchFarsighter:
             self.torso_target.register_load_state_dict_post_hook(lambda m, k, c=cache: c.clear())
         self.replay = seed_replay(cfgs, obs_space, device)
         # k_target cut (now or after blr.optimism's switch): each seed's exploratory actions
-        self.records = records_exploratory(cfg)
+        self.records = optimism.records_exploratory(cfg)
         self.exploratory_SE: np.ndarray | None = None
 
     @property
@@ -119,18 +119,18 @@ class SeedBatchFarsighter:
             parts = list(enumerate(self.parts))
             actions = [p.exploration.q(phi_SED[s], obs_SE[s], p.gen).argmax(1) for s, p in parts]
             if self.records:  # where a seed's draw chose otherwise than its mean would
-                m, rel = self.cfg.blr.cut_margin, cut_relative(self.cfg)
+                m, rel = self.cfg.blr.cut_margin, optimism.cut_relative(self.cfg)
+                mark = optimism.exploratory_actions
                 self.exploratory_SE = np.stack(
-                    [exploratory_actions(p.head, phi_SED[s], actions[s], m, rel) for s, p in parts]
+                    [mark(p.head, phi_SED[s], actions[s], m, rel) for s, p in parts]
                 )
         return torch.stack(actions).cpu().numpy()
 
     def observe(self, steps: Sequence[VectorStep]) -> None:
         """One vector step of every seed, in seed order."""
         self.replay.add_steps(steps, self.exploratory_SE if self.records else None)
-        until_reward = self.cfg.blr.optimism == "until-reward"
         for s, (p, st) in enumerate(zip(self.parts, steps, strict=True)):
-            if until_reward and not p.calibrated and bool(np.any(np.asarray(st.reward_E) > 0)):
+            if optimism.switches_now(self.cfg, p.calibrated, st.reward_E):
                 self.calibrate(s)
             p.exploration.observe(np.logical_or(st.terminated_E, st.truncated_E))
 

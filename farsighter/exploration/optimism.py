@@ -64,18 +64,26 @@ def cut_relative(cfg: Config) -> float:
 
 def restart_at_switch(cfg: Config, head: BLRHead, target_mean_AD: torch.Tensor) -> None:
     """``blr.switch_restart`` at the switch: the posterior back to its prior
-    (:meth:`BLRHead.restart`, ``prior``) or its targets' sums zeroed and refreshed (``zero-targets``:
-    mean 0, the width kept), and the targets' mean with it, so every value the optimism inflated
-    starts again from 0."""
+    (:meth:`BLRHead.restart`, ``prior``) or its rows kept without their targets
+    (:meth:`BLRHead.forget_targets`, ``zero-targets``), and the targets' mean with it, so every
+    value the optimism inflated starts again from 0."""
     if cfg.blr.switch_restart == "none" or cfg.blr.mode != "incremental":
         return
     if cfg.blr.switch_restart == "prior":
         head.restart()
     else:
-        head.phiy_AD.zero_()
-        head.yy_A.zero_()
-        head.refresh()
+        head.forget_targets()
     target_mean_AD.copy_(head.mean_AD)
+
+
+def switches_now(cfg: Config, calibrated: bool, reward_E: np.ndarray) -> bool:
+    """Whether ``blr.optimism = until-reward`` switches at a step paying ``reward_E``: the run
+    (or seed) has not switched yet and some environment was paid a positive reward."""
+    return (
+        cfg.blr.optimism == "until-reward"
+        and not calibrated
+        and bool(np.any(np.asarray(reward_E) > 0))
+    )
 
 
 def records_exploratory(cfg: Config) -> bool:

@@ -292,6 +292,13 @@ class BLRHead:
         self.noise_std, self.prior_std = self.noise_floor, self.prior_ratio * self.noise_floor
         self.refresh()
 
+    def forget_targets(self) -> None:
+        """Keep the rows, drop their targets: the sums of y and y^2 zeroed, as if every target
+        had been 0, and the posterior refreshed (mean 0, the width the rows made it)."""
+        self.phiy_AD.zero_()
+        self.yy_A.zero_()
+        self.refresh()
+
     @torch.no_grad()
     def accumulate(
         self,
