@@ -220,6 +220,7 @@ def test_agents_are_one_config_each_on_the_auto_preset(tmp_path: Path) -> None:
         "Farsighter (zero targets)",
         "Farsighter (zero targets, cut margin 1)",
         "Farsighter (zero targets, cut delay 3)",
+        "Farsighter (cut delay 3)",
     ]
     by = {a.label: a for a in AGENTS}
     # the default list trains no config twice, and leaves out the variants run only when named
@@ -252,10 +253,11 @@ def test_agents_are_one_config_each_on_the_auto_preset(tmp_path: Path) -> None:
         "Farsighter (zero targets)",
         "Farsighter (zero targets, cut margin 1)",
         "Farsighter (zero targets, cut delay 3)",
+        "Farsighter (cut delay 3)",
     }
     assert not named_only & set(StudyConfig().agents)
     assert "Farsighter (redraw step)" in StudyConfig().agents
-    assert len(StudyConfig().agents) == len(AGENTS) - 28
+    assert len(StudyConfig().agents) == len(AGENTS) - 29
     every = [
         run_config(a, QUICK, 3, tmp_path, (chain_id(10), 10_000))
         for a in AGENTS

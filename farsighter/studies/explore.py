@@ -452,6 +452,8 @@ AGENTS: tuple[Agent, ...] = (
         "farsighter",
         {"blr.switch_restart": "zero-targets", "blr.cut_delay": 3.0},
     ),
+    # the same delay rule with the optimistic targets kept at the switch (no restart)
+    Agent("Farsighter (cut delay 3)", "farsighter", {"blr.cut_delay": 3.0}),
 )
 COLORS = {a.label: f"C{i}" for i, a in enumerate(AGENTS)}
 _NAMED_ONLY = (
@@ -483,6 +485,7 @@ _NAMED_ONLY = (
     "Farsighter (zero targets)",
     "Farsighter (zero targets, cut margin 1)",
     "Farsighter (zero targets, cut delay 3)",
+    "Farsighter (cut delay 3)",
 )
 DEFAULT_AGENTS = tuple(a.label for a in AGENTS if a.label not in _NAMED_ONLY)
 """The default list: every agent once but those run only when named. "Farsighter (redraw k)" and
