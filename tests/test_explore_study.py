@@ -221,6 +221,8 @@ def test_agents_are_one_config_each_on_the_auto_preset(tmp_path: Path) -> None:
         "Farsighter (zero targets, cut margin 1)",
         "Farsighter (zero targets, cut delay 3)",
         "Farsighter (cut delay 3)",
+        "Farsighter (rearm 10)",
+        "Farsighter (rearm 10, cut delay 3)",
     ]
     by = {a.label: a for a in AGENTS}
     # the default list trains no config twice, and leaves out the variants run only when named
@@ -254,10 +256,12 @@ def test_agents_are_one_config_each_on_the_auto_preset(tmp_path: Path) -> None:
         "Farsighter (zero targets, cut margin 1)",
         "Farsighter (zero targets, cut delay 3)",
         "Farsighter (cut delay 3)",
+        "Farsighter (rearm 10)",
+        "Farsighter (rearm 10, cut delay 3)",
     }
     assert not named_only & set(StudyConfig().agents)
     assert "Farsighter (redraw step)" in StudyConfig().agents
-    assert len(StudyConfig().agents) == len(AGENTS) - 29
+    assert len(StudyConfig().agents) == len(AGENTS) - 31
     every = [
         run_config(a, QUICK, 3, tmp_path, (chain_id(10), 10_000))
         for a in AGENTS

@@ -63,7 +63,7 @@ from farsighter.exploration.optimism import (
     exploratory_actions,
     records_exploratory,
     restart_at_switch,
-    switches_now,
+    switch_at,
 )
 from farsighter.replay import VectorStep
 
@@ -106,6 +106,7 @@ class FarsighterAgent:
         # k_target cut: whether each environment's latest training action was exploratory
         self.cut = records_exploratory(cfg)
         self.exploratory_E: np.ndarray | None = None
+        self.unpaid = 0  # blr.rearm_episodes: episodes ended in a row without a reward
 
     # ------------------------------------------------------------------ acting
     def act(self, obs_E: np.ndarray, global_step: int, explore: bool = True) -> np.ndarray:
@@ -136,17 +137,21 @@ class FarsighterAgent:
 
     def observe(self, step: VectorStep) -> None:
         self.replay.add_step(step, self.exploratory_E if self.cut else None)
-        if switches_now(self.cfg, self.loss.calibrated, step.reward_E):
-            self.calibrate()
-        self.exploration.observe(np.logical_or(step.terminated_E, step.truncated_E))
+        done_E = np.logical_or(step.terminated_E, step.truncated_E)
+        turn, self.unpaid = switch_at(
+            self.cfg, self.loss.calibrated, self.unpaid, step.reward_E, done_E
+        )
+        if turn is not None:
+            self.calibrate(on=turn)
+        self.exploration.observe(done_E)
 
-    def calibrate(self, restart: bool = True) -> None:
+    def calibrate(self, restart: bool = True, on: bool = True) -> None:
         """``blr.optimism = until-reward``'s switch (:meth:`FarsighterLoss.calibrate`); the
         replay cuts its windows from now on where the calibrated target is cut, and the
         posterior restarts (``blr.switch_restart``; ``restart = False``: a checkpoint's
-        statistics, loaded, are kept)."""
-        self.loss.calibrate()
-        if restart:
+        statistics, loaded, are kept). ``on = False``: back to the optimism (rearmed)."""
+        self.loss.calibrate(on)
+        if restart and on:
             restart_at_switch(self.cfg, self.head, self.loss.target_mean_AD)
         self.replay.cut_exploratory = self.loss.k_target == "cut"
 
@@ -257,6 +262,8 @@ class FarsighterAgent:
         state["recent_phi"] = self.recent_phi.state_dict()
         if self.cfg.blr.optimism != "always":  # the switch; a default run's keys as before
             state["calibrated"] = self.loss.calibrated
+        if self.cfg.blr.rearm_episodes:
+            state["unpaid"] = self.unpaid
         cache = self.loss.target.cache  # keyed by replay rows: of no use without them
         state["target_cache"] = None if cache is None or not include_replay else cache.state_dict()
         return state
@@ -266,6 +273,7 @@ class FarsighterAgent:
         self.recent_phi.load_state_dict(state["recent_phi"])
         if state.get("calibrated", False) and not self.loss.calibrated:
             self.calibrate(restart=False)
+        self.unpaid = state.get("unpaid", 0)
         # a checkpoint from before the exploration object holds its pieces under our own keys
         self.exploration.load_state_dict(state.get("exploration", state))
         # the target cache (cleared by the target's load) is kept when the checkpoint has it

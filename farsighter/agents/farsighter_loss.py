@@ -52,14 +52,14 @@ class FarsighterLoss:
         self.target = CachedTarget(self.torso_target, cache)
         self.target_mean_AD = head.mean_AD.clone()
         self.kind, self.blr, self.k_target = cfg.loss, cfg.blr, cfg.k_target
-        self.calibrated = False  # blr.optimism until-reward, after the first positive reward
+        self.optimistic, self.calibrated = (cfg.blr, cfg.k_target), False  # blr.optimism
 
-    def calibrate(self) -> None:
+    def calibrate(self, on: bool = True) -> None:
         """``blr.optimism = until-reward``'s switch: from now on the posterior mean and the
         k-step target alone (no draw, no max with the one-step target; cut at exploratory
-        actions where ``k_target = cut``)."""
-        self.calibrated = True
-        self.blr, self.k_target = calibrated(self.blr, self.k_target)
+        actions where ``k_target = cut``); ``on = False``: the optimism again (rearmed)."""
+        self.calibrated = on
+        self.blr, self.k_target = calibrated(*self.optimistic, on)
 
     def copy_target(self) -> None:
         """Algorithm 1 line 8: target torso and target mean <- online ones (in place)."""

@@ -31,7 +31,7 @@ class SeedParts:
         self.cfg = cfg
         # the targets (blr.target, k_target), which blr.optimism until-reward switches
         self.blr, self.k_target = cfg.blr, cfg.k_target
-        self.calibrated = False
+        self.calibrated, self.unpaid = False, 0  # blr.optimism's switch, blr.rearm_episodes
         self.head = make_head(cfg, num_actions, dim, init_AD, device)
         self.target_mean_AD = self.head.mean_AD.clone()
         self.counters = FarsighterCounters(k=cfg.k)
@@ -42,11 +42,11 @@ class SeedParts:
         self.gen.manual_seed(cfg.seed + 3)
         self.cache = make_target_cache(cfg, device, dim)  # FarsighterLoss's, keyed by its streams
 
-    def calibrate(self, restart: bool = True) -> None:
+    def calibrate(self, restart: bool = True, on: bool = True) -> None:
         """``blr.optimism = until-reward``'s switch (``FarsighterAgent.calibrate``)."""
-        self.calibrated = True
-        self.blr, self.k_target = calibrated(self.blr, self.k_target)
-        if restart:
+        self.calibrated = on
+        self.blr, self.k_target = calibrated(self.cfg.blr, self.cfg.k_target, on)
+        if restart and on:
             restart_at_switch(self.cfg, self.head, self.target_mean_AD)
 
     def draws(self, rows: int, one_step: bool) -> Tensors:

@@ -130,16 +130,17 @@ class SeedBatchFarsighter:
         """One vector step of every seed, in seed order."""
         self.replay.add_steps(steps, self.exploratory_SE if self.records else None)
         for s, (p, st) in enumerate(zip(self.parts, steps, strict=True)):
-            if optimism.switches_now(self.cfg, p.calibrated, st.reward_E):
-                self.calibrate(s)
-            p.exploration.observe(np.logical_or(st.terminated_E, st.truncated_E))
+            done = np.logical_or(st.terminated_E, st.truncated_E)
+            turn, p.unpaid = optimism.switch_at(self.cfg, p.calibrated, p.unpaid, st.reward_E, done)
+            if turn is not None:
+                self.calibrate(s, on=turn)
+            p.exploration.observe(done)
 
-    def calibrate(self, s: int, restart: bool = True) -> None:
-        """Seed ``s``'s ``blr.optimism = until-reward`` switch (``FarsighterAgent.calibrate``):
-        its targets, its streams' windows cut where its calibrated target is cut, and its
-        posterior's restart."""
+    def calibrate(self, s: int, restart: bool = True, on: bool = True) -> None:
+        """Seed ``s``'s switch (``FarsighterAgent.calibrate``): its targets, its streams' windows
+        cut where its calibrated target is cut, and its posterior's restart."""
         p = self.parts[s]
-        p.calibrate(restart)
+        p.calibrate(restart, on)
         self.replay.cut_E[self.replay.seed_streams(s)] = p.k_target == "cut"
 
     # ------------------------------------------------------------------ learning

@@ -171,22 +171,26 @@ class FarsighterSeedMember(Member):
     def state_dict(self, include_replay: bool = True) -> dict[str, Any]:
         """The checkpoint of ``FarsighterAgent`` alone, for this seed."""
         b, s, p = self.batch, self.s, self.parts
-        return {
-            "torso": b.torso.member_state(s),
-            "torso_target": b.torso_target.member_state(s),
-            "head": p.head.state_dict(),
-            "target_mean_AD": p.target_mean_AD.clone(),
-            "opt": member_optimizer_state(b.opt, s),
-            "rng": p.rng.bit_generator.state,
-            "gen": p.gen.get_state(),
-            "counters": dataclasses.asdict(p.counters.settle()),
-            "replay": b.replay.member_state(s) if include_replay else None,
-            "exploration": p.exploration.state_dict(),
-            "recent_phi": p.recent_phi.state_dict(),
-            "target_cache": p.cache.state_dict()
-            if p.cache is not None and include_replay
-            else None,
-        } | ({"calibrated": p.calibrated} if self.cfg.blr.optimism != "always" else {})
+        return (
+            {
+                "torso": b.torso.member_state(s),
+                "torso_target": b.torso_target.member_state(s),
+                "head": p.head.state_dict(),
+                "target_mean_AD": p.target_mean_AD.clone(),
+                "opt": member_optimizer_state(b.opt, s),
+                "rng": p.rng.bit_generator.state,
+                "gen": p.gen.get_state(),
+                "counters": dataclasses.asdict(p.counters.settle()),
+                "replay": b.replay.member_state(s) if include_replay else None,
+                "exploration": p.exploration.state_dict(),
+                "recent_phi": p.recent_phi.state_dict(),
+                "target_cache": p.cache.state_dict()
+                if p.cache is not None and include_replay
+                else None,
+            }
+            | ({"calibrated": p.calibrated} if self.cfg.blr.optimism != "always" else {})
+            | ({"unpaid": p.unpaid} if self.cfg.blr.rearm_episodes else {})
+        )
 
     def load_state_dict(self, state: dict[str, Any]) -> None:
         """A checkpoint of this seed (written alone or in a batch). Seeds resume together only
@@ -205,6 +209,7 @@ class FarsighterSeedMember(Member):
         p.recent_phi.load_state_dict(state["recent_phi"])
         if state.get("calibrated", False) and not p.calibrated:
             b.calibrate(s, restart=False)
+        p.unpaid = state.get("unpaid", 0)
         p.exploration.load_state_dict(state.get("exploration", state))
         if p.cache is not None:  # the rows it keeps, when the checkpoint has them
             p.cache.load_state_dict(state.get("target_cache"))

@@ -93,6 +93,13 @@ class BLRConfig:
     (docs/design.md "What the switch keeps"): with the default cut at margin 0 a restart leaves
     DoorKey-5x5 unsolved; zero-targets with ``cut_margin`` 1 solves and holds it in both seeds
     that switch, but holds the chain L = 30 in 2/5. Our extension."""
+    rearm_episodes: int = 0
+    """With ``optimism = until-reward``: after this many episodes in a row that paid no positive
+    reward since the switch, the targets' optimism again, until the next positive reward
+    switches once more. 0: never (the optimism ends at the first reward for good). A reward found
+    by chance before the values know its way (MiniGrid DoorKey: one goal, then none in 95k steps
+    under calibrated targets, whose posterior sd of 0.01 leaves the draws nothing to explore
+    with) is then looked for again with the optimism that found it. Our extension."""
     cut_margin: float = 0.0
     """With ``Config.k_target = cut`` (now or after the switch): how sure the posterior must be
     that an action other than the mean's greedy one was worse before a window is cut there: its
@@ -162,6 +169,10 @@ class BLRConfig:
             (self.cov_scale > 0, f"blr.cov_scale must be > 0 (got {self.cov_scale})"),
             (0 < self.forgetting <= 1, "blr.forgetting must be in (0, 1]"),
             (self.data_weight > 0, f"blr.data_weight must be > 0 (got {self.data_weight})"),
+            (
+                self.rearm_episodes >= 0,
+                f"blr.rearm_episodes must be >= 0 (got {self.rearm_episodes})",
+            ),
             (
                 self.cut_margin >= 0 and math.isfinite(self.cut_margin),
                 f"blr.cut_margin must be a finite number >= 0 (got {self.cut_margin})",

@@ -18,11 +18,15 @@ import torch
 from farsighter.config import BLRConfig, Config
 from farsighter.ops.blr import BLRHead
 
+KTarget = Literal["k", "max", "max-mean", "cut"]
 
-def calibrated(blr: BLRConfig, k_target: str) -> tuple[BLRConfig, Literal["k", "cut"]]:
-    """``blr.optimism = until-reward``'s targets after its switch: the posterior mean's, and the
-    k-step target alone (cut at exploratory actions where ``k_target`` or
-    ``blr.calibrated_k_target`` is cut)."""
+
+def calibrated(blr: BLRConfig, k_target: KTarget, on: bool = True) -> tuple[BLRConfig, KTarget]:
+    """``blr.optimism = until-reward``'s targets after its switch (the configured ``blr`` and
+    ``k_target`` where ``on`` is False): the posterior mean's, and the k-step target alone (cut
+    at exploratory actions where ``k_target`` or ``blr.calibrated_k_target`` is cut)."""
+    if not on:
+        return blr, k_target
     cut = k_target == "cut" or blr.calibrated_k_target == "cut"
     return dataclasses.replace(blr, target="mean"), "cut" if cut else "k"
 
@@ -76,14 +80,23 @@ def restart_at_switch(cfg: Config, head: BLRHead, target_mean_AD: torch.Tensor) 
     target_mean_AD.copy_(head.mean_AD)
 
 
-def switches_now(cfg: Config, calibrated: bool, reward_E: np.ndarray) -> bool:
-    """Whether ``blr.optimism = until-reward`` switches at a step paying ``reward_E``: the run
-    (or seed) has not switched yet and some environment was paid a positive reward."""
-    return (
-        cfg.blr.optimism == "until-reward"
-        and not calibrated
-        and bool(np.any(np.asarray(reward_E) > 0))
-    )
+def switch_at(
+    cfg: Config, calibrated: bool, unpaid: int, reward_E: np.ndarray, done_E: np.ndarray
+) -> tuple[bool | None, int]:
+    """``blr.optimism = until-reward``'s switch at a step that pays ``reward_E`` and ends the
+    episodes ``done_E``: True where the run (or seed) switches to calibrated targets (a
+    positive reward while optimistic), False where it takes up the optimism again
+    (``blr.rearm_episodes`` > 0 episodes in a row have paid nothing since), else None; and the
+    episodes ended in a row without a positive reward, after this step."""
+    if cfg.blr.optimism != "until-reward":
+        return None, unpaid
+    paid = bool(np.any(np.asarray(reward_E) > 0))
+    unpaid = 0 if paid else unpaid + int(np.count_nonzero(done_E))
+    if paid and not calibrated:
+        return True, unpaid
+    if calibrated and 0 < cfg.blr.rearm_episodes <= unpaid:
+        return False, unpaid
+    return None, unpaid
 
 
 def records_exploratory(cfg: Config) -> bool:

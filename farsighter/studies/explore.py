@@ -454,6 +454,14 @@ AGENTS: tuple[Agent, ...] = (
     ),
     # the same delay rule with the optimistic targets kept at the switch (no restart)
     Agent("Farsighter (cut delay 3)", "farsighter", {"blr.cut_delay": 3.0}),
+    # the optimism taken up again after 10 episodes in a row unpaid since the switch
+    # (blr.rearm_episodes), with the default cut and with the cut past 3 steps of delay
+    Agent("Farsighter (rearm 10)", "farsighter", {"blr.rearm_episodes": 10}),
+    Agent(
+        "Farsighter (rearm 10, cut delay 3)",
+        "farsighter",
+        {"blr.rearm_episodes": 10, "blr.cut_delay": 3.0},
+    ),
 )
 COLORS = {a.label: f"C{i}" for i, a in enumerate(AGENTS)}
 _NAMED_ONLY = (
@@ -486,6 +494,8 @@ _NAMED_ONLY = (
     "Farsighter (zero targets, cut margin 1)",
     "Farsighter (zero targets, cut delay 3)",
     "Farsighter (cut delay 3)",
+    "Farsighter (rearm 10)",
+    "Farsighter (rearm 10, cut delay 3)",
 )
 DEFAULT_AGENTS = tuple(a.label for a in AGENTS if a.label not in _NAMED_ONLY)
 """The default list: every agent once but those run only when named. "Farsighter (redraw k)" and
