@@ -759,6 +759,94 @@ def test_optimism_until_reward_switches_to_calibrated_targets_at_the_first_rewar
     assert not plain.loss.calibrated and plain.loss.k_target == "max"
 
 
+def test_rearm_takes_up_the_optimism_again_after_unpaid_episodes(tmp_path: Path) -> None:
+    """blr.rearm_episodes n: after the switch, n episodes in a row that pay no positive reward
+    (a reward anywhere in an episode, on any stream, starts the count again) bring back the
+    configured optimistic targets and uncut windows; the next positive reward switches again;
+    a checkpoint carries the count; n = 0 never rearms."""
+    from farsighter.exploration.optimism import switch_at
+
+    values = {
+        "blr.target": "sample",
+        "k_target": "max",
+        "k": 3,
+        "blr.optimism": "until-reward",
+        "blr.calibrated_k_target": "cut",
+        "blr.rearm_episodes": 2,
+    }
+    agent = make_agent(tmp_path / "a", **values)
+    obs = np.zeros((1, 4), np.float32)
+
+    def step(a: FarsighterAgent, reward: float, done: bool) -> None:
+        a.observe(
+            VectorStep(
+                obs,
+                a.act(obs, 10),
+                np.array([reward]),
+                np.array([done]),
+                np.array([False]),
+                [obs[0]] if done else None,
+            )
+        )
+
+    def optimistic(a: FarsighterAgent) -> bool:
+        targets = (a.loss.blr.target, a.loss.k_target, a.replay.cut_exploratory)
+        if a.loss.calibrated:
+            assert targets == ("mean", "cut", True)
+        else:
+            assert targets == ("sample", "max", False)
+            assert a._draws(4, True).keys() == {"eps_BA", "one_eps_BA"}
+        return not a.loss.calibrated
+
+    step(agent, 0.0, True)
+    step(agent, 0.0, True)  # unpaid episodes before the switch change nothing
+    assert optimistic(agent)
+    step(agent, 1.0, False)
+    assert not optimistic(agent) and agent.unpaid == 0
+    step(agent, 0.0, True)  # the paid episode ends: it counts as paid (the reward started it)
+    assert not optimistic(agent) and agent.unpaid == 1
+    again = make_agent(tmp_path / "b", **values)
+    again.load_state_dict(agent.state_dict())
+    assert not optimistic(again) and again.unpaid == 1
+    step(again, 0.0, False)
+    step(again, 0.5, False)  # a reward mid-episode: the count starts again
+    step(again, 0.0, True)
+    assert not optimistic(again) and again.unpaid == 1
+    step(again, 0.0, True)
+    assert optimistic(again) and again.unpaid == 2  # rearmed
+    step(again, 0.0, True)
+    assert optimistic(again)
+    step(again, 0.2, False)
+    assert not optimistic(again)  # switched once more
+    # the count over streams: a reward on any stream is pay; each stream's episode end counts
+    cfg = again.cfg
+    assert switch_at(cfg, True, 0, np.array([0.0, 1.0]), np.array([True, True])) == (None, 0)
+    assert switch_at(cfg, True, 1, np.zeros(3), np.array([True, False, True])) == (False, 3)
+    assert switch_at(cfg, True, 0, np.zeros(3), np.zeros(3, bool)) == (None, 0)
+    # a seed of a batch carries its own count and state in its checkpoint
+    from farsighter.agents.farsighter_seeds import SeedBatchFarsighter
+
+    env = gym.make("CartPole-v1")
+    cfgs = [dataclasses.replace(cfg, seed=s) for s in (1, 2)]
+    batches = [
+        SeedBatchFarsighter(
+            cfgs, env.observation_space, env.action_space, device=torch.device("cpu")
+        )
+        for _ in range(2)
+    ]
+    batches[0].calibrate(1)
+    batches[0].parts[1].unpaid = 1
+    batches[1].member(1).load_state_dict(batches[0].member(1).state_dict(include_replay=False))
+    assert (batches[1].parts[1].calibrated, batches[1].parts[1].unpaid) == (True, 1)
+    # n = 0 (the default) never rearms
+    never = make_agent(tmp_path / "c", **{**values, "blr.rearm_episodes": 0})
+    step(never, 1.0, True)
+    for _ in range(5):
+        step(never, 0.0, True)
+    assert not optimistic(never)
+    assert "unpaid" not in never.state_dict(include_replay=False)
+
+
 def test_cut_records_where_the_draw_chose_otherwise_than_the_mean(tmp_path: Path) -> None:
     """k_target cut: the replay flags exactly the training actions that differ from the
     posterior mean's greedy action (every uniform action before learning_starts), and cuts its

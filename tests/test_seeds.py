@@ -96,7 +96,8 @@ def _files(run: Path) -> dict[str, list[str]]:
             {"blr__posterior_sampling": "uniform", "target_update_every": 400},
         ),
         # the default's targets until each seed's own first reward, then the mean's target cut
-        # before exploratory actions (each seed's streams switch on their own)
+        # before exploratory actions (each seed's streams switch on their own), and the optimism
+        # again after each unpaid episode since (blr.rearm_episodes)
         (
             "farsighter",
             "farsighter/Chain8-v0",
@@ -104,6 +105,7 @@ def _files(run: Path) -> dict[str, list[str]]:
                 "preset": "general",
                 "blr__optimism": "until-reward",
                 "blr__calibrated_k_target": "cut",
+                "blr__rearm_episodes": 1,
                 "k": 3,
                 "learning_starts": 100,
                 "batch_size": 24,
