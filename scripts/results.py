@@ -465,6 +465,22 @@ ENTRIES = (
         366,
     ),
     Entry(
+        "explore/delay-only-doorkey5",
+        "explore --families doorkey --sizes 5 --seeds 2 3 --agents "
+        "'Farsighter (cut delay 3)' --workers 2 --seeds-per-batch 1",
+        "the cut only past 3 steps of delay, the optimistic targets kept at the switch, "
+        "DoorKey-5x5 (the two seeds that switch)",
+        389,
+    ),
+    Entry(
+        "explore/rearm-doorkey5",
+        "explore --families doorkey --sizes 5 --seeds 2 3 --agents 'Farsighter (rearm 10)' "
+        "'Farsighter (rearm 10, cut delay 3)' --workers 2 --seeds-per-batch 1",
+        "the optimism taken up again after 10 unpaid episodes since the switch, with the "
+        "default cut and with the cut past 3 steps of delay, DoorKey-5x5",
+        1443,
+    ),
+    Entry(
         "minatar",
         "atari --games minatar --agents DDQN BDQN Farsighter --seeds 1 2 --steps 50000 "
         "--eval-every 10000 --eval-episodes 10",
