@@ -9,10 +9,9 @@ with w the posterior mean (Eq. 8), or the latest acting Thompson draw (``blr.tar
 the BDQN authors' code). With ``blr.target = sample`` a posterior draw per row and action,
 sqrt(cov_scale) phi_target(s')^T U_a z, is added to both Q's of s' (optimism that propagates;
 drawn as sqrt(cov_scale) ||U_a^T phi_target(s')|| eps, the same distribution from one normal per
-row and action: ``BLRHead.q_noise_rows``);
-with ``k_target = max`` the target is the larger of the k-step and the one-step target of the
-same start, with ``max-mean`` the one larger under the posterior mean (our extensions:
-``Config.k_target``, ``BLRConfig.target``).
+row and action: ``BLRHead.q_noise_rows``; none where s' is s_t with ``blr.stay_optimism``
+False); with ``k_target = max`` the target is the larger of the k-step and the one-step target
+of the same start, with ``max-mean`` the one larger under the posterior mean (``k_target``).
 
 The loss owns the target torso and the target mean, which move only at the hard copy (Algorithm
 1 line 8: :meth:`FarsighterLoss.copy_target`). It draws nothing: the acting draw and the normals
@@ -32,7 +31,7 @@ from farsighter.agents.common import TensorBatch, obs_tensor, td_loss, to_device
 from farsighter.agents.cuda_graph import Tensors
 from farsighter.agents.learner import CachedTarget
 from farsighter.config import Config
-from farsighter.exploration.optimism import calibrated
+from farsighter.exploration.optimism import calibrated, without_staying
 from farsighter.networks import Torso, online_and_target
 from farsighter.ops.blr import BLRHead
 from farsighter.ops.targets import centered_optimism, double_q_target
@@ -84,6 +83,8 @@ class FarsighterLoss:
     ) -> tuple[torch.Tensor, torch.Tensor | None]:
         """:meth:`targets`, and (``with_mean``) the same target under the posterior mean, no
         draw added (``k_target = max-mean`` chooses by it); else None."""
+        if not self.blr.stay_optimism:  # no draw where the window ends where it began
+            draws = without_staying(draws, t)
         if phi_next_target is None:
             phi_next, phi_next_target = online_and_target(
                 self.torso, self.torso_target, t.next_obs_B
@@ -164,8 +165,7 @@ class FarsighterLoss:
         return {prefix + "phi_next_target_BD": self.target(next_obs_B, e_B, next_B)}
 
 
-# The math of the loss on given features, shared with the seed-batched agent
-# (farsighter.agents.farsighter_seeds), which computes the features of every seed at once.
+# The math of the loss on given features, shared with the seed batch (agents/farsighter_seeds).
 
 
 def uses_one_step(k_target: str) -> bool:

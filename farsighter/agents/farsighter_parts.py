@@ -18,7 +18,7 @@ from farsighter.agents.farsighter_posterior import RECENT_FEATURES, FarsighterCo
 from farsighter.agents.learner import make_target_cache
 from farsighter.config import Config
 from farsighter.exploration import ThompsonExploration
-from farsighter.exploration.optimism import calibrated, restart_at_switch
+from farsighter.exploration.optimism import calibrated, restart_at_switch, without_staying
 
 
 class SeedParts:
@@ -80,6 +80,8 @@ class SeedParts:
         """y of Eq. 8 under this seed's posterior and target mean (``kind``: ``blr.target``
         unless given; ``mean`` for the target under the posterior mean)."""
         head, blr = self.head, self.blr
+        if not blr.stay_optimism:  # no draw where the window ends where it began
+            draws = without_staying(draws, t)
         return eq8_targets(
             head,
             self.target_mean_AD,

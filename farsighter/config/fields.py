@@ -93,6 +93,16 @@ class BLRConfig:
     (docs/design.md "What the switch keeps"): with the default cut at margin 0 a restart leaves
     DoorKey-5x5 unsolved; zero-targets with ``cut_margin`` 1 solves and holds it in both seeds
     that switch, but holds the chain L = 30 in 2/5. Our extension."""
+    stay_optimism: bool = True
+    """With ``target = sample`` or ``sample-greedy``: whether a target whose window ends where it
+    began (s_{t+n} equal to s_t, as after an action that does not move the agent: MiniGrid's
+    pick up, drop, toggle and done where they change nothing, a walk into FrozenLake's wall)
+    takes the draw at s' too. True: every target does. False: those take the posterior mean's
+    value, no draw. A value that bootstraps on its own state adds the draw's upward bias once
+    per bootstrap, over 1 / (1 - gamma) of them, so staying put becomes the best action and a
+    held draw repeats it (DoorKey-5x5: docs/design.md); posterior sampling over a whole value
+    function pays no such bonus for a self-loop. A task whose every step moves (the chain,
+    deep sea, CartPole) runs bit for bit as with True. Our extension."""
     rearm_episodes: int = 0
     """With ``optimism = until-reward``: after this many episodes in a row that paid no positive
     reward since the switch, the targets' optimism again, until the next positive reward

@@ -462,6 +462,9 @@ AGENTS: tuple[Agent, ...] = (
         "farsighter",
         {"blr.rearm_episodes": 10, "blr.cut_delay": 3.0},
     ),
+    # no draw in a target whose window ends where it began (blr.stay_optimism False): no
+    # optimism for staying put
+    Agent("Farsighter (no optimism in place)", "farsighter", {"blr.stay_optimism": False}),
 )
 COLORS = {a.label: f"C{i}" for i, a in enumerate(AGENTS)}
 _NAMED_ONLY = (
@@ -496,6 +499,7 @@ _NAMED_ONLY = (
     "Farsighter (cut delay 3)",
     "Farsighter (rearm 10)",
     "Farsighter (rearm 10, cut delay 3)",
+    "Farsighter (no optimism in place)",
 )
 DEFAULT_AGENTS = tuple(a.label for a in AGENTS if a.label not in _NAMED_ONLY)
 """The default list: every agent once but those run only when named. "Farsighter (redraw k)" and
