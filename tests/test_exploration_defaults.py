@@ -847,6 +847,75 @@ def test_rearm_takes_up_the_optimism_again_after_unpaid_episodes(tmp_path: Path)
     assert "unpaid" not in never.state_dict(include_replay=False)
 
 
+def test_stay_optimism_false_takes_no_draw_where_the_window_ends_where_it_began(
+    tmp_path: Path,
+) -> None:
+    """blr.stay_optimism False: a target whose s' is its s_t takes the posterior mean's value
+    (no draw), every other row the sampled target with the same normals; alone and in a seed
+    batch's parts."""
+    from farsighter.agents.farsighter_seeds import SeedBatchFarsighter
+
+    values = {"blr.target": "sample", "k_target": "k", "blr.stay_optimism": False}
+    agent = make_agent(tmp_path / "a", **values)
+    g = torch.Generator().manual_seed(5)
+    obs = torch.randn(8, 4, generator=g)
+    next_obs = torch.cat([obs[:4], torch.randn(4, 4, generator=g)])  # rows 0-3 stay put
+    t = farsighter_module.TensorBatch(
+        obs, next_obs, torch.zeros(8, dtype=torch.long), torch.ones(8), torch.full((8,), 0.5)
+    )
+    draws = agent._draws(8, False)
+
+    def y_of(head: BLRHead, target_mean: torch.Tensor, kind: str, phi: torch.Tensor, d: dict):
+        return farsighter_module.eq8_targets(head, target_mean, kind, t, phi, phi, d)
+
+    phi = agent.loss.torso_target(next_obs)
+    agent.torso.load_state_dict(agent.loss.torso_target.state_dict())  # one phi for both Q's
+    y = agent.loss.targets(t, draws)
+    mean = y_of(agent.head, agent.loss.target_mean_AD, "mean", phi, {})
+    sample = y_of(agent.head, agent.loss.target_mean_AD, "sample", phi, draws)
+    assert torch.equal(y[:4], mean[:4]) and torch.equal(y[4:], sample[4:])
+    assert (sample[:4] != mean[:4]).all()  # the draw would have moved them
+    # a seed of a batch: its parts' targets
+    env = gym.make("CartPole-v1")
+    batch = SeedBatchFarsighter(
+        [agent.cfg], env.observation_space, env.action_space, device=torch.device("cpu")
+    )
+    p = batch.parts[0]
+    y = p.y(t, phi, phi, draws)
+    mean = y_of(p.head, p.target_mean_AD, "mean", phi, {})
+    sample = y_of(p.head, p.target_mean_AD, "sample", phi, draws)
+    assert torch.equal(y[:4], mean[:4]) and torch.equal(y[4:], sample[4:])
+    assert (sample[:4] != mean[:4]).all()
+
+
+def test_stay_optimism_false_is_the_default_run_where_every_step_moves(tmp_path: Path) -> None:
+    """On the chain every step moves the agent or ends the episode (no bootstrap), so a run with
+    blr.stay_optimism False is the default run bit for bit (the general preset, 400 steps,
+    through its first reward and the switch)."""
+    from farsighter.train import train
+    from tests.test_seeds import _agent_state, _files, _same_states
+
+    runs = {}
+    for name, extra in (("plain", {}), ("moves", {"blr__stay_optimism": False})):
+        cfg = tiny(
+            "farsighter",
+            tmp_path / name,
+            env="farsighter/Chain8-v0",
+            preset="general",
+            k=3,
+            learning_starts=100,
+            batch_size=24,
+            total_steps=1_500,
+            seed=3,
+            **extra,
+        )
+        train(cfg)
+        runs[name] = _agent_state(tmp_path / name / "checkpoint.pt")
+    assert runs["plain"]["calibrated"]  # it switched
+    _same_states(runs["plain"], runs["moves"])
+    assert _files(tmp_path / "plain") == _files(tmp_path / "moves")
+
+
 def test_cut_records_where_the_draw_chose_otherwise_than_the_mean(tmp_path: Path) -> None:
     """k_target cut: the replay flags exactly the training actions that differ from the
     posterior mean's greedy action (every uniform action before learning_starts), and cuts its
