@@ -465,6 +465,13 @@ AGENTS: tuple[Agent, ...] = (
     # no draw in a target whose window ends where it began (blr.stay_optimism False): no
     # optimism for staying put
     Agent("Farsighter (no optimism in place)", "farsighter", {"blr.stay_optimism": False}),
+    # and the draw redrawn when the episode returns to an observation it saw (blr.redraw
+    # revisit), so a held draw does not repeat an action that leaves the agent where it is
+    Agent(
+        "Farsighter (no optimism in place, redraw revisit)",
+        "farsighter",
+        {"blr.stay_optimism": False, "blr.redraw": "revisit"},
+    ),
 )
 COLORS = {a.label: f"C{i}" for i, a in enumerate(AGENTS)}
 _NAMED_ONLY = (
@@ -500,6 +507,7 @@ _NAMED_ONLY = (
     "Farsighter (rearm 10)",
     "Farsighter (rearm 10, cut delay 3)",
     "Farsighter (no optimism in place)",
+    "Farsighter (no optimism in place, redraw revisit)",
 )
 DEFAULT_AGENTS = tuple(a.label for a in AGENTS if a.label not in _NAMED_ONLY)
 """The default list: every agent once but those run only when named. "Farsighter (redraw k)" and
