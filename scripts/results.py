@@ -481,6 +481,14 @@ ENTRIES = (
         1443,
     ),
     Entry(
+        "explore/inplace-doorkey5",
+        "explore --families doorkey --sizes 5 --seeds 1 2 3 --agents "
+        "'Farsighter (no optimism in place)' --workers 2 --seeds-per-batch 1",
+        "no draw in a target whose window ends where it began (blr.stay_optimism False), "
+        "DoorKey-5x5",
+        771,
+    ),
+    Entry(
         "minatar",
         "atari --games minatar --agents DDQN BDQN Farsighter --seeds 1 2 --steps 50000 "
         "--eval-every 10000 --eval-episodes 10",
