@@ -489,6 +489,14 @@ ENTRIES = (
         771,
     ),
     Entry(
+        "explore/inplace-revisit-doorkey5",
+        "explore --families doorkey --sizes 5 --seeds 1 2 3 --agents "
+        "'Farsighter (no optimism in place, redraw revisit)' --workers 2 --seeds-per-batch 1",
+        "the same with the draw redrawn where the episode returns to an observation, "
+        "DoorKey-5x5",
+        1358,
+    ),
+    Entry(
         "minatar",
         "atari --games minatar --agents DDQN BDQN Farsighter --seeds 1 2 --steps 50000 "
         "--eval-every 10000 --eval-episodes 10",
