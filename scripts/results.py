@@ -492,8 +492,7 @@ ENTRIES = (
         "explore/inplace-revisit-doorkey5",
         "explore --families doorkey --sizes 5 --seeds 1 2 3 --agents "
         "'Farsighter (no optimism in place, redraw revisit)' --workers 2 --seeds-per-batch 1",
-        "the same with the draw redrawn where the episode returns to an observation, "
-        "DoorKey-5x5",
+        "the same with the draw redrawn where the episode returns to an observation, DoorKey-5x5",
         1358,
     ),
     Entry(
