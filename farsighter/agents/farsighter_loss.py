@@ -84,7 +84,7 @@ class FarsighterLoss:
         """:meth:`targets`, and (``with_mean``) the same target under the posterior mean, no
         draw added (``k_target = max-mean`` chooses by it); else None."""
         if not self.blr.stay_optimism:  # no draw where the window ends where it began
-            draws = without_staying(draws, t)
+            draws = without_staying(draws, t.obs_B, t.next_obs_B)
         if phi_next_target is None:
             phi_next, phi_next_target = online_and_target(
                 self.torso, self.torso_target, t.next_obs_B

@@ -81,7 +81,7 @@ class SeedParts:
         unless given; ``mean`` for the target under the posterior mean)."""
         head, blr = self.head, self.blr
         if not blr.stay_optimism:  # no draw where the window ends where it began
-            draws = without_staying(draws, t)
+            draws = without_staying(draws, t.obs_B, t.next_obs_B)
         return eq8_targets(
             head,
             self.target_mean_AD,

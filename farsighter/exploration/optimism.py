@@ -15,7 +15,6 @@ from typing import Literal
 import numpy as np
 import torch
 
-from farsighter.agents.common import TensorBatch
 from farsighter.config import BLRConfig, Config
 from farsighter.ops.blr import BLRHead
 
@@ -62,13 +61,15 @@ def exploratory_actions(
     return differs_E.cpu().numpy()
 
 
-def without_staying(draws: dict[str, torch.Tensor], t: TensorBatch) -> dict[str, torch.Tensor]:
+def without_staying(
+    draws: dict[str, torch.Tensor], obs_B: torch.Tensor, next_obs_B: torch.Tensor
+) -> dict[str, torch.Tensor]:
     """``blr.stay_optimism = False``: the targets' normals (``eps_BA``) zeroed in the rows whose
-    window ends where it began (``t.next_obs_B`` equal to ``t.obs_B``), so their draw at s' is
-    0 (the noise is the normal times a width, per row and action)."""
+    window ends where it began (``next_obs_B`` equal to ``obs_B``), so their draw at s' is 0
+    (the noise is the normal times a width, per row and action)."""
     if "eps_BA" not in draws:
         return draws
-    moved_B1 = (t.obs_B != t.next_obs_B).flatten(1).any(dim=1, keepdim=True)
+    moved_B1 = (obs_B != next_obs_B).flatten(1).any(dim=1, keepdim=True)
     return {**draws, "eps_BA": draws["eps_BA"] * moved_B1}
 
 
