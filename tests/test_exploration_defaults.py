@@ -683,6 +683,25 @@ def test_minigrid_observations_are_flat_and_scaled() -> None:
     assert 0.0 <= obs.min() and obs.max() <= 1.0
 
 
+UNTIL_REWARD_CUT = {
+    "blr.target": "sample",
+    "k_target": "max",
+    "k": 3,
+    "blr.optimism": "until-reward",
+    "blr.calibrated_k_target": "cut",
+}
+"""The default's targets until the first reward, then the mean's cut target (k = 3)."""
+
+
+def _paid_step(agent: FarsighterAgent, obs: np.ndarray, reward: float, done: bool = False) -> None:
+    """One acted step of one stream at ``obs`` that pays ``reward`` (and ends its episode)."""
+    final = [obs[0]] if done else None
+    action = agent.act(obs, 10)
+    agent.observe(
+        VectorStep(obs, action, np.array([reward]), np.array([done]), np.array([False]), final)
+    )
+
+
 def test_optimism_until_reward_switches_to_calibrated_targets_at_the_first_reward(
     tmp_path: Path,
 ) -> None:
@@ -746,16 +765,7 @@ def test_optimism_until_reward_switches_to_calibrated_targets_at_the_first_rewar
     # the default never switches
     plain = make_agent(tmp_path / "c", **{**values, "blr.optimism": "always"})
     for reward in (1.0, 2.0):
-        plain.observe(
-            VectorStep(
-                obs,
-                plain.act(obs, 10),
-                np.array([reward]),
-                np.array([False]),
-                np.array([False]),
-                None,
-            )
-        )
+        _paid_step(plain, obs, reward)
     assert not plain.loss.calibrated and plain.loss.k_target == "max"
 
 
@@ -766,28 +776,12 @@ def test_rearm_takes_up_the_optimism_again_after_unpaid_episodes(tmp_path: Path)
     a checkpoint carries the count; n = 0 never rearms."""
     from farsighter.exploration.optimism import switch_at
 
-    values = {
-        "blr.target": "sample",
-        "k_target": "max",
-        "k": 3,
-        "blr.optimism": "until-reward",
-        "blr.calibrated_k_target": "cut",
-        "blr.rearm_episodes": 2,
-    }
+    values = {**UNTIL_REWARD_CUT, "blr.rearm_episodes": 2}
     agent = make_agent(tmp_path / "a", **values)
     obs = np.zeros((1, 4), np.float32)
 
     def step(a: FarsighterAgent, reward: float, done: bool) -> None:
-        a.observe(
-            VectorStep(
-                obs,
-                a.act(obs, 10),
-                np.array([reward]),
-                np.array([done]),
-                np.array([False]),
-                [obs[0]] if done else None,
-            )
-        )
+        _paid_step(a, obs, reward, done)
 
     def optimistic(a: FarsighterAgent) -> bool:
         targets = (a.loss.blr.target, a.loss.k_target, a.replay.cut_exploratory)
@@ -888,15 +882,14 @@ def test_stay_optimism_false_takes_no_draw_where_the_window_ends_where_it_began(
     assert (sample[:4] != mean[:4]).all()
 
 
-def test_stay_optimism_false_is_the_default_run_where_every_step_moves(tmp_path: Path) -> None:
-    """On the chain every step moves the agent or ends the episode (no bootstrap), so a run with
-    blr.stay_optimism False is the default run bit for bit (the general preset, 400 steps,
-    through its first reward and the switch)."""
+def _chain8_runs(tmp_path: Path, variants: dict[str, dict], steps: int) -> dict[str, dict]:
+    """The agent state at the end of a general-preset Farsighter run on the chain L = 8 (seed
+    3, k = 3) per named variant of its config, each in its own directory under ``tmp_path``."""
     from farsighter.train import train
-    from tests.test_seeds import _agent_state, _files, _same_states
+    from tests.test_seeds import _agent_state
 
     runs = {}
-    for name, extra in (("plain", {}), ("moves", {"blr__stay_optimism": False})):
+    for name, extra in variants.items():
         cfg = tiny(
             "farsighter",
             tmp_path / name,
@@ -905,12 +898,22 @@ def test_stay_optimism_false_is_the_default_run_where_every_step_moves(tmp_path:
             k=3,
             learning_starts=100,
             batch_size=24,
-            total_steps=1_500,
+            total_steps=steps,
             seed=3,
             **extra,
         )
         train(cfg)
         runs[name] = _agent_state(tmp_path / name / "checkpoint.pt")
+    return runs
+
+
+def test_stay_optimism_false_is_the_default_run_where_every_step_moves(tmp_path: Path) -> None:
+    """On the chain every step moves the agent or ends the episode (no bootstrap), so a run with
+    blr.stay_optimism False is the default run bit for bit (the general preset, 1,500 steps,
+    through its first reward and the switch)."""
+    from tests.test_seeds import _files, _same_states
+
+    runs = _chain8_runs(tmp_path, {"plain": {}, "moves": {"blr__stay_optimism": False}}, 1_500)
     assert runs["plain"]["calibrated"]  # it switched
     _same_states(runs["plain"], runs["moves"])
     assert _files(tmp_path / "plain") == _files(tmp_path / "moves")
@@ -952,13 +955,7 @@ def test_until_reward_then_cut_switches_the_replay_to_cut_windows(tmp_path: Path
     """blr.calibrated_k_target cut: before the first positive reward the run keeps k_target max
     on uncut windows while it records its exploratory actions; at the switch the loss's target
     becomes the mean's cut target and the replay cuts its windows, which a reload keeps."""
-    values = {
-        "blr.target": "sample",
-        "k_target": "max",
-        "k": 3,
-        "blr.optimism": "until-reward",
-        "blr.calibrated_k_target": "cut",
-    }
+    values = dict(UNTIL_REWARD_CUT)
     agent = make_agent(tmp_path / "a", **values)
     assert agent.cut and not agent.replay.cut_exploratory
     obs = np.zeros((1, 4), np.float32)
@@ -984,28 +981,10 @@ def test_until_reward_then_cut_is_the_default_run_until_the_first_reward(tmp_pat
     bit for bit (it records its exploratory actions beside the same rows): the chain L = 8 pays
     nothing in the first 400 steps of seed 3."""
     from farsighter.replay.buffer import EXPLORATORY
-    from farsighter.train import train
-    from tests.test_seeds import _agent_state, _files, _same_states
+    from tests.test_seeds import _files, _same_states
 
-    runs = {}
-    for name, extra in (
-        ("plain", {"blr__optimism": "always"}),
-        ("switch", {}),  # the defaults: until-reward, then cut
-    ):
-        cfg = tiny(
-            "farsighter",
-            tmp_path / name,
-            env="farsighter/Chain8-v0",
-            preset="general",
-            k=3,
-            learning_starts=100,
-            batch_size=24,
-            total_steps=400,
-            seed=3,
-            **extra,
-        )
-        train(cfg)
-        runs[name] = _agent_state(tmp_path / name / "checkpoint.pt")
+    # the defaults (switch): until-reward, then cut
+    runs = _chain8_runs(tmp_path, {"plain": {"blr__optimism": "always"}, "switch": {}}, 400)
     assert runs["switch"].pop("calibrated") is False
     plain_replay, switch_replay = runs["plain"].pop("replay"), runs["switch"].pop("replay")
     _same_states(runs["plain"], runs["switch"])
