@@ -225,6 +225,7 @@ def test_agents_are_one_config_each_on_the_auto_preset(tmp_path: Path) -> None:
         "Farsighter (rearm 10, cut delay 3)",
         "Farsighter (no optimism in place)",
         "Farsighter (no optimism in place, redraw revisit)",
+        "Farsighter (no optimism in place, zero targets, cut delay 3)",
     ]
     by = {a.label: a for a in AGENTS}
     # the default list trains no config twice, and leaves out the variants run only when named
@@ -262,10 +263,11 @@ def test_agents_are_one_config_each_on_the_auto_preset(tmp_path: Path) -> None:
         "Farsighter (rearm 10, cut delay 3)",
         "Farsighter (no optimism in place)",
         "Farsighter (no optimism in place, redraw revisit)",
+        "Farsighter (no optimism in place, zero targets, cut delay 3)",
     }
     assert not named_only & set(StudyConfig().agents)
     assert "Farsighter (redraw step)" in StudyConfig().agents
-    assert len(StudyConfig().agents) == len(AGENTS) - 33
+    assert len(StudyConfig().agents) == len(AGENTS) - 34
     every = [
         run_config(a, QUICK, 3, tmp_path, (chain_id(10), 10_000))
         for a in AGENTS

@@ -472,6 +472,12 @@ AGENTS: tuple[Agent, ...] = (
         "farsighter",
         {"blr.stay_optimism": False, "blr.redraw": "revisit"},
     ),
+    # and with the targets zeroed at the switch and the cut past 3 steps of delay
+    Agent(
+        "Farsighter (no optimism in place, zero targets, cut delay 3)",
+        "farsighter",
+        {"blr.stay_optimism": False, "blr.switch_restart": "zero-targets", "blr.cut_delay": 3.0},
+    ),
 )
 COLORS = {a.label: f"C{i}" for i, a in enumerate(AGENTS)}
 _NAMED_ONLY = (
@@ -508,6 +514,7 @@ _NAMED_ONLY = (
     "Farsighter (rearm 10, cut delay 3)",
     "Farsighter (no optimism in place)",
     "Farsighter (no optimism in place, redraw revisit)",
+    "Farsighter (no optimism in place, zero targets, cut delay 3)",
 )
 DEFAULT_AGENTS = tuple(a.label for a in AGENTS if a.label not in _NAMED_ONLY)
 """The default list: every agent once but those run only when named. "Farsighter (redraw k)" and
