@@ -496,6 +496,15 @@ ENTRIES = (
         1358,
     ),
     Entry(
+        "explore/inplace-zero-delay-doorkey5",
+        "explore --families doorkey --sizes 5 --seeds 1 2 3 --agents "
+        "'Farsighter (no optimism in place, zero targets, cut delay 3)' --workers 2 "
+        "--seeds-per-batch 1",
+        "no optimism for staying put, the targets zeroed at the switch, the cut past 3 steps of "
+        "delay, DoorKey-5x5",
+        746,
+    ),
+    Entry(
         "minatar",
         "atari --games minatar --agents DDQN BDQN Farsighter --seeds 1 2 --steps 50000 "
         "--eval-every 10000 --eval-episodes 10",
