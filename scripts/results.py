@@ -505,6 +505,20 @@ ENTRIES = (
         746,
     ),
     Entry(
+        "explore/inplace-zero-delay-frozenlake",
+        "explore --families frozenlake --sizes 4 --seeds 1 2 3 4 5 --agents "
+        "'Farsighter (no optimism in place, zero targets, cut delay 3)' --workers 2",
+        "the same on FrozenLake 4x4",
+        315,
+    ),
+    Entry(
+        "explore/inplace-zero-delay-empty5",
+        "explore --families empty --sizes 5 --seeds 1 2 3 --agents "
+        "'Farsighter (no optimism in place, zero targets, cut delay 3)' --workers 2",
+        "the same on MiniGrid Empty-5x5",
+        355,
+    ),
+    Entry(
         "minatar",
         "atari --games minatar --agents DDQN BDQN Farsighter --seeds 1 2 --steps 50000 "
         "--eval-every 10000 --eval-episodes 10",
