@@ -519,6 +519,14 @@ ENTRIES = (
         355,
     ),
     Entry(
+        "explore/inplace-zero-delay-doorkey5-s45",
+        "explore --families doorkey --sizes 5 --seeds 4 5 --agents "
+        "'Farsighter (no optimism in place, zero targets, cut delay 3)' --workers 2 "
+        "--seeds-per-batch 1",
+        "the same on DoorKey-5x5, seeds 4 and 5",
+        398,
+    ),
+    Entry(
         "minatar",
         "atari --games minatar --agents DDQN BDQN Farsighter --seeds 1 2 --steps 50000 "
         "--eval-every 10000 --eval-episodes 10",
