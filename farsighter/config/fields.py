@@ -10,6 +10,9 @@ from typing import Annotated, Literal
 
 import tyro
 
+KTarget = Literal["k", "max", "max-mean", "cut"]
+"""The values of ``Config.k_target``."""
+
 
 @dataclass(frozen=True)
 class BLRConfig:
@@ -618,7 +621,7 @@ class Config:
     """Discount factor. Table 1: 0.99."""
     k: int = 1
     """Steps per return: 1 is one-step TD; k > 1 uses k-step returns with gamma^k bootstraps."""
-    k_target: Literal["k", "max", "max-mean", "cut"] = "k"
+    k_target: KTarget = "k"
     """k: the k-step target (section 4.4). max (bdqn, farsighter): the larger of the k-step and
     the one-step target of each sampled start. A k-step return follows the behaviour for k steps,
     so an exploratory episode that ended early makes it pessimistic and stops optimism from

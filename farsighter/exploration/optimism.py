@@ -10,15 +10,13 @@ those actions (:func:`exploratory_actions`) and the replay keeps the flag with t
 from __future__ import annotations
 
 import dataclasses
-from typing import Literal
 
 import numpy as np
 import torch
 
 from farsighter.config import BLRConfig, Config
+from farsighter.config.fields import KTarget
 from farsighter.ops.blr import BLRHead
-
-KTarget = Literal["k", "max", "max-mean", "cut"]
 
 
 def calibrated(blr: BLRConfig, k_target: KTarget, on: bool = True) -> tuple[BLRConfig, KTarget]:
@@ -100,8 +98,8 @@ def switch_at(
     positive reward while optimistic), False where it takes up the optimism again
     (``blr.rearm_episodes`` > 0 episodes in a row have paid nothing since), else None; and the
     episodes ended in a row without a positive reward, after this step."""
-    if cfg.blr.optimism != "until-reward":
-        return None, unpaid
+    if cfg.blr.optimism != "until-reward" or (calibrated and not cfg.blr.rearm_episodes):
+        return None, unpaid  # nothing to switch (the count matters only to a rearm)
     paid = bool(np.any(np.asarray(reward_E) > 0))
     unpaid = 0 if paid else unpaid + int(np.count_nonzero(done_E))
     if paid and not calibrated:
