@@ -201,6 +201,20 @@ def test_sample_weights_moments_and_independence() -> None:
                 assert np.abs(block).max() < 0.05
 
 
+def test_one_draw_is_mean_plus_square_root_times_normals() -> None:
+    """A single draw (an environment's held draw replaced; computed as (z^T U^T)^T on CPU) and
+    two, against mean + U z with the same normals, U the upper-triangular L^-T (a product
+    transposed the wrong way round would give mean + U^T z, a different distribution)."""
+    head = _fitted_head(cov_scale=1.7)
+    u_ADD = head._sqrt_cov32_ADD.double()
+    assert not torch.allclose(u_ADD, u_ADD.transpose(1, 2))  # so U^T z would differ
+    for n in (1, 2, 3):
+        w_NAD = head.sample_weights(n, generator=torch.Generator().manual_seed(9)).double()
+        z_ADN = torch.randn((3, 4, n), generator=torch.Generator().manual_seed(9)).double()
+        want_NAD = head.mean_AD.double() + (1.7**0.5 * u_ADD @ z_ADN).permute(2, 0, 1)
+        torch.testing.assert_close(w_NAD, want_NAD, rtol=1e-5, atol=1e-6)
+
+
 def test_thompson_draws_are_the_posterior_each_used_once_in_order() -> None:
     head = _fitted_head(cov_scale=1.7)
     draws = ThompsonDraws(head, block=64)

@@ -567,7 +567,14 @@ class BLRHead:
             device=self.device,
             dtype=torch.float32,
         )
-        noise_ADN = torch.bmm(self._sqrt_cov32_ADD, z_ADN)
+        if n <= 2 and self.device.type == "cpu":
+            # One or two draws (an environment's held draw replaced): (z^T U^T)^T, the same bits
+            # as U z. On CPU, bmm with one or two columns takes a slow path (0.8 ms for two
+            # 596 x 596 actions); with the product turned around it takes 0.16 ms.
+            noise_ADN = torch.bmm(z_ADN.transpose(1, 2), self._sqrt_cov32_ADD.transpose(1, 2))
+            noise_ADN = noise_ADN.transpose(1, 2)
+        else:
+            noise_ADN = torch.bmm(self._sqrt_cov32_ADD, z_ADN)
         return self._mean32_AD.unsqueeze(0) + math.sqrt(self.cov_scale) * noise_ADN.permute(2, 0, 1)
 
     @torch.no_grad()
