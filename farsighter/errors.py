@@ -15,3 +15,15 @@ class RunDirError(FarsighterError):
 
 class EnvError(FarsighterError):
     """An environment id that cannot be made, or a space an algorithm cannot handle."""
+
+
+class Diverged(FarsighterError):
+    """Training whose values left the floating-point range (the TD loss or the posterior's
+    statistics NaN or inf): the config's values make the updates grow without bound."""
+
+    def __init__(self, what: str) -> None:
+        super().__init__(
+            f"training diverged: {what}; these settings make the updates grow without bound "
+            "(smaller steps, --lr, or for the Bayesian agents a narrower prior, --blr.prior-std, "
+            "are what to try); what the run directory saved before is kept"
+        )

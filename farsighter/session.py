@@ -22,7 +22,7 @@ from tqdm import tqdm
 
 from farsighter.agents import Agent
 from farsighter.config import Config
-from farsighter.errors import RunDirError
+from farsighter.errors import Diverged, RunDirError
 from farsighter.rundir import SUMMARY_FILE, RunLogger, load_checkpoint, save_checkpoint
 
 POLICY_FILE = "policy.pt"  # the trained agent without its replay, for acting
@@ -379,6 +379,8 @@ class RunLog:
         loss = self.last_loss
         state.loss_value = float(loss.item()) if loss is not None else float("nan")
         if loss is not None:
+            if not np.isfinite(state.loss_value):
+                raise Diverged(f"the TD loss is {state.loss_value} at step {step}")
             log.scalar("losses/td_loss", state.loss_value, step)
         for name, value in agent.diagnostics().items():
             log.scalar(f"charts/{name}", value, step)

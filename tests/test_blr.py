@@ -6,6 +6,7 @@ import numpy as np
 import pytest
 import torch
 
+from farsighter.errors import Diverged
 from farsighter.ops.blr import (
     BLRHead,
     ThompsonDraws,
@@ -213,6 +214,18 @@ def test_one_draw_is_mean_plus_square_root_times_normals() -> None:
         z_ADN = torch.randn((3, 4, n), generator=torch.Generator().manual_seed(9)).double()
         want_NAD = head.mean_AD.double() + (1.7**0.5 * u_ADD @ z_ADN).permute(2, 0, 1)
         torch.testing.assert_close(w_NAD, want_NAD, rtol=1e-5, atol=1e-6)
+
+
+def test_refresh_of_non_finite_targets_says_the_training_diverged() -> None:
+    """NaN or inf regression targets (a run whose values blew up) stop the refresh with
+    :class:`Diverged`, which the CLI prints as one line, instead of a factorisation error."""
+    for bad in (float("nan"), float("inf")):
+        head = _head(2, 3)
+        phi, act, y = _make_data([4, 4], 3, seed=1)
+        y[2] = bad
+        head.accumulate(phi, act, y)
+        with pytest.raises(Diverged, match="regression targets hold NaN or inf"):
+            head.refresh()
 
 
 def test_thompson_draws_are_the_posterior_each_used_once_in_order() -> None:

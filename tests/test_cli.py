@@ -134,6 +134,21 @@ def test_run_dir_that_cannot_be_created_is_one_line_exit_2(tmp_path: Path) -> No
     )
 
 
+def test_diverged_training_is_one_line_exit_2(tmp_path: Path) -> None:
+    """A config whose updates blow up (DDQN with lr 1e12) stops at the log interval where the TD
+    loss left the floating-point range, with one line naming it, not a traceback."""
+    res = run_cli(
+        "train",
+        *("--algo", "ddqn", "--env", "CartPole-v1", "--lr", "1e12", "--total-steps", "3000"),
+        *("--learning-starts", "500", "--run-dir", "run", "--no-progress"),
+        cwd=tmp_path,
+    )
+    assert res.returncode == 2, res.stderr
+    lines = res.stderr.strip().splitlines()
+    assert len(lines) == 1 and "training diverged: the TD loss is nan at step" in lines[0], lines
+    assert "Traceback" not in res.stderr
+
+
 @pytest.mark.parametrize("command", [["eval", "missing"], ["plot", "missing"], ["eval"]])
 def test_eval_and_plot_bad_input_exit_2(tmp_path: Path, command: list[str]) -> None:
     res = run_cli(*command, cwd=tmp_path)

@@ -31,6 +31,8 @@ from typing import Any
 
 import torch
 
+from farsighter.errors import Diverged
+
 __all__ = [
     "DRAW_BLOCK",
     "SCALES",
@@ -359,6 +361,9 @@ class BLRHead:
         ``scale="residual"`` sigma_eps (and the prior sigma with it) is first re-estimated from the
         residuals under the posterior mean, and the covariance scaled to it.
         """
+        # NaN or inf targets reach phi y and y^2 first (cheap to check: A d numbers)
+        if not bool((self.phiy_AD * 0).sum() == 0 and (self.yy_A * 0).sum() == 0):
+            raise Diverged("the posterior's regression targets hold NaN or inf")
         mean_AD, sqrt_cov_ADD, jitter_A = blr_posterior_factor(
             self.phiphiT_ADD, self.phiy_AD, self.prior_std, self.noise_std
         )
