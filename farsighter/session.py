@@ -6,6 +6,7 @@ and the summary. :func:`farsighter.train.train` composes these into the loop.
 from __future__ import annotations
 
 import json
+import math
 import pickle
 import sys
 import time
@@ -379,7 +380,7 @@ class RunLog:
         loss = self.last_loss
         state.loss_value = float(loss.item()) if loss is not None else float("nan")
         if loss is not None:
-            if not np.isfinite(state.loss_value):
+            if not math.isfinite(state.loss_value):
                 raise Diverged(f"the TD loss is {state.loss_value} at step {step}")
             log.scalar("losses/td_loss", state.loss_value, step)
         for name, value in agent.diagnostics().items():
