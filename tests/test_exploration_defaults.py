@@ -631,6 +631,9 @@ def test_auto_gives_discrete_tasks_the_general_preset_and_keeps_table_1_selectab
     assert (defaults.blr.optimism, defaults.blr.calibrated_k_target) == ("until-reward", "cut")
     bdqn = make_config("bdqn", "farsighter/Chain10-v0")
     assert (bdqn.blr.optimism, bdqn.k_target) == ("always", "k")  # the baseline as it was
+    # acting draws widened to the action gaps, Farsighter's alone
+    assert (defaults.blr.act_width, bdqn.blr.act_width) == ("action-gap", "posterior")
+    assert make_config("farsighter", "CartPole-v1", preset="control").blr.act_width == "posterior"
     # a flag still wins over the preset's per-algorithm values
     assert make_config("farsighter", "CartPole-v1", blr__redraw="step").blr.redraw == "step"
 

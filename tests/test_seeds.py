@@ -86,8 +86,9 @@ def _files(run: Path) -> dict[str, list[str]]:
             },
         ),
         # Table 1's control column: batch-mode refreshes over each seed's latest tuples, the
-        # recent window, k = 10, each seed's target cache over its own streams (two a seed)
-        ("farsighter", "CartPole-v1", {"num_envs": 2}),
+        # recent window, k = 10, each seed's target cache over its own streams (two a seed),
+        # and the acting draws widened to each seed's own action gaps (its prior sigma is 0.1)
+        ("farsighter", "CartPole-v1", {"num_envs": 2, "blr__act_width": "action-gap"}),
         # BDQN of the control column: a refit from each seed's own replay every 400 steps, on
         # the steps of a target copy too (the refit reads the target torso before the copy)
         (
@@ -169,6 +170,12 @@ def test_a_seed_in_a_batch_trains_as_it_does_alone(
             for seed in SEEDS
         ]
         assert any(steps), steps
+    if "blr__act_width" in values:  # each seed's own factor, widening its draws
+        scales = [
+            _agent_state(tmp_path / "batch" / f"s{seed}" / "checkpoint.pt")["head"]["act_scale"]
+            for seed in SEEDS
+        ]
+        assert min(scales) > 1.0 and len(set(scales)) == len(SEEDS), scales
     # the seeds are different runs
     first = _agent_state(tmp_path / "batch" / f"s{SEEDS[0]}" / "policy.pt")
     second = _agent_state(tmp_path / "batch" / f"s{SEEDS[1]}" / "policy.pt")

@@ -245,6 +245,7 @@ class FarsighterAgent:
             "posterior_refreshes": float(self.head.num_refreshes),
             "jitter_events": float(self.head.jitter_events),
             "noise_std": self.head.noise_std,
+            **({"act_scale": self.head.act_scale} if self.cfg.blr.act_width != "posterior" else {}),
         }
 
     # ------------------------------------------------------------------ checkpoints

@@ -23,7 +23,7 @@ from farsighter.agents.common import (
 )
 from farsighter.config import Config
 from farsighter.networks import MLPTorso, RandomFeatureTorso, Torso, make_torso
-from farsighter.ops.blr import BLRHead, greedy_predictive_variance
+from farsighter.ops.blr import BLRHead, action_gap_scale, greedy_predictive_variance
 from farsighter.replay import ReplayBuffer
 
 FEATURE_CHUNK = 4_096  # rows per forward pass when computing features for a posterior refresh
@@ -148,6 +148,8 @@ def refresh_posterior(
             return
         head.refresh()
         phi_ND = recent
+    if cfg.blr.act_width == "action-gap":
+        head.act_scale = action_gap_scale(head, phi_ND)
     if not cfg.adaptive_k.enabled:  # a diagnostic only: computed when read
         counters.defer_q_variance(head, phi_ND)
         return

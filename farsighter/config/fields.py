@@ -140,6 +140,16 @@ class BLRConfig:
     rewards do not scale with it. So a factor below 1 weighs what the task pays more against
     that bonus (a goal that ends the episode: MiniGrid, FrozenLake) while the frontier's wider
     draws keep their lead over the states the run knows. Our extension."""
+    act_width: Literal["posterior", "action-gap"] = "posterior"
+    """Width of the acting draws (Thompson's, Eq. 7). posterior: the posterior's own.
+    action-gap: widened, at every refresh, by the mean over recent minibatch states of the
+    largest minus the smallest posterior-mean Q over the prior sigma, when that is above 1
+    (``farsighter.ops.blr.action_gap_scale``). The prior's width is sized to the residual noise;
+    where the learned values set actions further apart than that (an action that costs -10
+    almost everywhere, Taxi's pickup) no draw reaches across the gap and Thompson never tries
+    the action where it pays. The targets' draws keep the posterior's width (widening them
+    compounds through the bootstraps), and a task whose action gaps stay within the prior's
+    width acts as it did, bit for bit. Our extension."""
     center_sample: bool = False
     """With target = sample: subtract from every bootstrapped target of a minibatch the
     minibatch's mean optimism (the draws' sum of y - y_mean over the sum of the bootstrap

@@ -256,6 +256,9 @@ class BLRHead:
         self.prior_std = float(prior_std)
         self.noise_std = float(noise_std)
         self.cov_scale = float(cov_scale)
+        # A factor on the width of the acting draws alone (sample_weights; blr.act_width): the
+        # targets' draws and the predictive variances keep the posterior's own width.
+        self.act_scale: float = 1.0
         self.forgetting = float(forgetting)
         self.device = torch.device(device)
         self.stats_dtype = stats_dtype
@@ -565,7 +568,8 @@ class BLRHead:
 
     @torch.no_grad()
     def sample_weights(self, n: int, generator: torch.Generator | None = None) -> torch.Tensor:
-        """n independent draws w = mean_a + sqrt(cov_scale) U_a z of every action's weights (Eq. 7).
+        """n independent draws w = mean_a + sqrt(cov_scale) act_scale U_a z of every action's
+        weights (Eq. 7; ``act_scale`` 1 unless ``blr.act_width`` widens the acting draws).
 
         Returns shape (n, A, D), float32; z is independent across draws and actions.
         """
@@ -585,7 +589,8 @@ class BLRHead:
             noise_ADN = noise_ADN.transpose(1, 2)
         else:
             noise_ADN = torch.bmm(self._sqrt_cov32_ADD, z_ADN)
-        return self._mean32_AD.unsqueeze(0) + math.sqrt(self.cov_scale) * noise_ADN.permute(2, 0, 1)
+        width = math.sqrt(self.cov_scale) * self.act_scale
+        return self._mean32_AD.unsqueeze(0) + width * noise_ADN.permute(2, 0, 1)
 
     @torch.no_grad()
     def predictive_var(self, phi_BD: torch.Tensor) -> torch.Tensor:
@@ -622,6 +627,7 @@ class BLRHead:
             "prior_std": self.prior_std,
             "noise_std": self.noise_std,
             "cov_scale": self.cov_scale,
+            "act_scale": self.act_scale,
             "forgetting": self.forgetting,
             "scale": self.scale,
             "noise_floor": self.noise_floor,
@@ -649,6 +655,7 @@ class BLRHead:
         self.prior_std = float(state["prior_std"])
         self.noise_std = float(state["noise_std"])
         self.cov_scale = float(state["cov_scale"])
+        self.act_scale = float(state.get("act_scale", 1.0))
         self.forgetting = float(state["forgetting"])
         self.scale = str(state.get("scale", "fixed"))
         self.noise_floor = float(state.get("noise_floor", self.noise_std))
@@ -727,6 +734,23 @@ def _in_place(cache: torch.Tensor | None, value: torch.Tensor) -> torch.Tensor:
     if cache is not None and cache.shape == value.shape and cache.device == value.device:
         return cache.copy_(value)
     return value.to(torch.float32).contiguous().clone()
+
+
+@torch.no_grad()
+def action_gap_scale(head: BLRHead, phi_BD: torch.Tensor) -> float:
+    """``blr.act_width = action-gap``'s factor on the acting draws' width: the mean over the rows
+    of the largest minus the smallest posterior-mean Q, over the prior sigma, and at least 1.
+
+    A draw at a state the run has not been to spreads about the prior sigma (sigma_eps under
+    ``scale = residual``), which is sized to the residual noise. Where the learned values set
+    actions further apart than that (a penalised action: Taxi's -10 pickup) no draw reaches
+    across the gap, and Thompson never tries the action where it would pay. Widened to the gap,
+    the prior over an untried action's value spans the values the actions take."""
+    if phi_BD.shape[0] == 0:
+        return 1.0
+    q_BA = phi_BD.to(torch.float32) @ head.mean_AD.T
+    gap = float((q_BA.max(dim=1).values - q_BA.min(dim=1).values).mean())
+    return max(1.0, gap / head.prior_std) if math.isfinite(gap) else 1.0
 
 
 @torch.no_grad()
