@@ -226,6 +226,7 @@ def test_agents_are_one_config_each_on_the_auto_preset(tmp_path: Path) -> None:
         "Farsighter (no optimism in place)",
         "Farsighter (no optimism in place, redraw revisit)",
         "Farsighter (no optimism in place, zero targets, cut delay 3)",
+        "Farsighter (posterior width)",
     ]
     by = {a.label: a for a in AGENTS}
     # the default list trains no config twice, and leaves out the variants run only when named
@@ -264,10 +265,11 @@ def test_agents_are_one_config_each_on_the_auto_preset(tmp_path: Path) -> None:
         "Farsighter (no optimism in place)",
         "Farsighter (no optimism in place, redraw revisit)",
         "Farsighter (no optimism in place, zero targets, cut delay 3)",
+        "Farsighter (posterior width)",
     }
     assert not named_only & set(StudyConfig().agents)
     assert "Farsighter (redraw step)" in StudyConfig().agents
-    assert len(StudyConfig().agents) == len(AGENTS) - 34
+    assert len(StudyConfig().agents) == len(AGENTS) - 35
     every = [
         run_config(a, QUICK, 3, tmp_path, (chain_id(10), 10_000))
         for a in AGENTS

@@ -478,6 +478,9 @@ AGENTS: tuple[Agent, ...] = (
         "farsighter",
         {"blr.stay_optimism": False, "blr.switch_restart": "zero-targets", "blr.cut_delay": 3.0},
     ),
+    # the acting draws at the posterior's own width (the default before the draws were widened
+    # to the action gaps, blr.act_width action-gap)
+    Agent("Farsighter (posterior width)", "farsighter", {"blr.act_width": "posterior"}),
 )
 COLORS = {a.label: f"C{i}" for i, a in enumerate(AGENTS)}
 _NAMED_ONLY = (
@@ -515,6 +518,7 @@ _NAMED_ONLY = (
     "Farsighter (no optimism in place)",
     "Farsighter (no optimism in place, redraw revisit)",
     "Farsighter (no optimism in place, zero targets, cut delay 3)",
+    "Farsighter (posterior width)",
 )
 DEFAULT_AGENTS = tuple(a.label for a in AGENTS if a.label not in _NAMED_ONLY)
 """The default list: every agent once but those run only when named. "Farsighter (redraw k)" and
