@@ -148,8 +148,9 @@ class BLRConfig:
     where the learned values set actions further apart than that (an action that costs -10
     almost everywhere, Taxi's pickup) no draw reaches across the gap and Thompson never tries
     the action where it pays. The targets' draws keep the posterior's width (widening them
-    compounds through the bootstraps), and a task whose action gaps stay within the prior's
-    width acts as it did, bit for bit. Our extension."""
+    compounds through the bootstraps; with ``target = thompson`` the loss reuses the acting
+    draw, widened), and a task whose action gaps stay within the prior's width acts as it did,
+    bit for bit. Our extension."""
     center_sample: bool = False
     """With target = sample: subtract from every bootstrapped target of a minibatch the
     minibatch's mean optimism (the draws' sum of y - y_mean over the sum of the bootstrap
