@@ -2,7 +2,8 @@
 again.
 
 An agent with a BLR head asks :class:`ThompsonExploration` for Q(s, a) = phi(s)^T w_a under each
-environment's current draw w ~ N(mean_a, cov_scale Cov_a). *When* a draw is replaced is a
+environment's current draw w ~ N(mean_a, act_scale^2 cov_scale Cov_a) (``act_scale`` 1 unless
+``blr.act_width`` widens it). *When* a draw is replaced is a
 :class:`Schedule`, chosen by ``blr.redraw``:
 
 * ``step`` (Algorithm 2 line 2): a fresh draw at every step for every environment, made a block
