@@ -18,7 +18,7 @@ from farsighter.agents.common import td_loss
 from farsighter.agents.farsighter import FarsighterAgent
 from farsighter.config import PRESETS, make_config, validate
 from farsighter.envs import make_env
-from farsighter.envs.chain import ChainEnv, chain_id
+from farsighter.envs.chain import ChainEnv, chain_id, drift_chain_id
 from farsighter.errors import ConfigError, EnvError
 from farsighter.exploration.revisit import EpisodeVisits
 from farsighter.ops.blr import BLRHead, residual_variance
@@ -633,6 +633,10 @@ def test_auto_gives_discrete_tasks_the_general_preset_and_keeps_table_1_selectab
     assert (bdqn.blr.optimism, bdqn.k_target) == ("always", "k")  # the baseline as it was
     # acting draws widened to the action gaps, Farsighter's alone
     assert (defaults.blr.act_width, bdqn.blr.act_width) == ("action-gap", "posterior")
+    # ... and the posterior restarted from its prior at the switch, Farsighter's alone
+    assert (defaults.blr.switch_restart, bdqn.blr.switch_restart) == ("prior", "none")
+    control = make_config("farsighter", "CartPole-v1", preset="control")
+    assert (control.blr.switch_restart, control.blr.optimism) == ("none", "always")
     assert make_config("farsighter", "CartPole-v1", preset="control").blr.act_width == "posterior"
     # a flag still wins over the preset's per-algorithm values
     assert make_config("farsighter", "CartPole-v1", blr__redraw="step").blr.redraw == "step"
@@ -677,6 +681,31 @@ def test_chain_ids_are_registered_on_first_use() -> None:
     assert obs.shape == (7,) and obs[0] == 1.0 and math.isclose(float(obs.sum()), 1.0)
     with pytest.raises(EnvError, match="length must be >= 2"):
         make_env(make_config("ddqn", "farsighter/Chain1-v0"), seed=0)
+
+
+def test_drift_chain_goes_back_on_a_wrong_move_and_stops_at_its_time_limit() -> None:
+    env = make_env(make_config("ddqn", drift_chain_id(6)), seed=0)
+    lock = ChainEnv(length=6).right_L
+    assert np.array_equal(env.unwrapped.right_L, lock)  # the chain's own lock
+    obs, _ = env.reset(seed=0)
+    # a wrong move at the first state stays there, and the episode goes on
+    obs, r, ended, truncated, info = env.step(1 - lock[0])
+    assert (r, ended, truncated, info["position"], obs[0]) == (0.0, False, False, 0, 1.0)
+    obs, r, *_ = env.step(lock[0])
+    assert obs[1] == 1.0 and r == pytest.approx(-0.01 / 6)
+    obs, r, ended, _, info = env.step(1 - lock[1])  # drifts one state back
+    assert (obs[0], info["position"], ended) == (1.0, 0, False)
+    for a in lock[:3]:  # 6 steps in all: the time limit ends it short of the end
+        *_, ended, truncated, _ = env.step(a)
+    assert truncated and not ended
+    env.reset()
+    total = 0.0
+    for a in lock:  # L right moves in a row reach the end within the limit
+        _, r, ended, _, _ = env.step(a)
+        total += r
+    # (Gymnasium's time limit flags that L-th step truncated too; a terminal step bootstraps
+    # nothing either way)
+    assert ended and total == pytest.approx(0.99)
 
 
 def test_minigrid_observations_are_flat_and_scaled() -> None:

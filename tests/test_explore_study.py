@@ -20,7 +20,7 @@ import pytest
 from farsighter.cli import main
 from farsighter.config import make_config
 from farsighter.envs import make_env, make_vector_env
-from farsighter.envs.chain import chain_id
+from farsighter.envs.chain import chain_id, drift_chain_id
 from farsighter.envs.deep_sea import deep_sea_id
 from farsighter.errors import FarsighterError
 from farsighter.studies import explore, maze
@@ -55,6 +55,10 @@ def test_family_table() -> None:
     assert chain.env_ids == tuple(chain_id(n) for n in chain.sizes)
     assert chain.budgets == (10_000, 10_000, 20_000, 30_000, 50_000)
     assert (chain.threshold, chain.eval_episodes) == (0.5, 1)
+    drift = FAMILIES["driftchain"]  # deep sea's budget: 2^L + 100 episodes of L steps, clamped
+    assert drift.env_ids == tuple(drift_chain_id(n) for n in (6, 10, 14, 20))
+    assert drift.budgets == (6 * 1_000, 10 * 1_124, 14 * 3_000, 20 * 3_000)
+    assert (drift.threshold, drift.eval_episodes, drift.eval_every_at(20)) == (0.5, 1, 100)
     assert FAMILIES["doorkey"].env_ids == tuple(f"MiniGrid-DoorKey-{n}x{n}-v0" for n in (5, 6, 8))
     assert FAMILIES["doorkey"].budgets == (100_000, 250_000, 1_000_000)
     assert FAMILIES["empty"].env_ids == tuple(f"MiniGrid-Empty-{n}x{n}-v0" for n in (5, 8, 16))
@@ -97,7 +101,7 @@ def test_tasks_with_the_steps_cap_and_sizes() -> None:
     capped = dataclasses.replace(QUICK, steps=15_000)
     assert [n for _, n in tasks(capped)] == [10_000, 10_000, 15_000]
     full = tasks(StudyConfig())
-    assert len(full) == 5 + 3 + 3 + 3 + 3 + 1 + 1 + 2 + 9 + 4
+    assert len(full) == 5 + 4 + 3 + 3 + 3 + 3 + 1 + 1 + 2 + 9 + 4  # chain, driftchain, ...
     assert ("MountainCar-v0", 200_000) in full and ("Acrobot-v1", 100_000) in full
     assert full[-1] == (deep_sea_id(20, stochastic=True), 20 * 3_000)
     # --episodes sets deep sea runs (both families) alone; --steps still caps
@@ -278,7 +282,7 @@ def test_agents_are_one_config_each_on_the_auto_preset(tmp_path: Path) -> None:
             "Farsighter (redraw k)",
             "Farsighter (random features)",
             "Farsighter (data weight 100)",
-            "Farsighter (optimism until reward, then cut)",
+            "Farsighter (switch restart)",
         )
     ]
     assert len({repr(dataclasses.replace(c, run_dir="")) for c in every}) == len(every)
@@ -299,9 +303,14 @@ def test_agents_are_one_config_each_on_the_auto_preset(tmp_path: Path) -> None:
         by["Farsighter (optimism until reward, then cut)"], QUICK, 3, tmp_path, (chain_id(10), 1)
     )
     assert (switch.blr.optimism, switch.blr.calibrated_k_target) == ("until-reward", "cut")
+    default = run_config(by["Farsighter"], QUICK, 3, tmp_path, (chain_id(10), 1))
+    # the defaults up to session 36: the default but for the targets kept at the switch
+    kept = dataclasses.replace(default.blr, switch_restart="none")
     assert dataclasses.replace(switch, run_dir="") == dataclasses.replace(
-        run_config(by["Farsighter"], QUICK, 3, tmp_path, (chain_id(10), 1)), run_dir=""
+        default, run_dir="", blr=kept
     )
+    restart = run_config(by["Farsighter (switch restart)"], QUICK, 3, tmp_path, (chain_id(10), 1))
+    assert dataclasses.replace(restart, run_dir="") == dataclasses.replace(default, run_dir="")
     # the variants of the targets keep them for the whole run, as when their studies were made
     for label in ("Farsighter (mean, k-step target)", "Farsighter (cut)"):
         assert run_config(by[label], QUICK, 3, tmp_path, (chain_id(10), 1)).blr.optimism == "always"
@@ -894,7 +903,10 @@ def test_deep_sea_claims_fit_bsuites_episode_and_say_it_plainly(tmp_path: Path) 
 # ------------------------------------------------------------------------------------------------
 
 BAD = [
-    ("--families nope", "unknown explore family(ies) ['nope']; accepted: chain, doorkey"),
+    (
+        "--families nope",
+        "unknown explore family(ies) ['nope']; accepted: chain, driftchain, doorkey",
+    ),
     ("--families chain chain", "--families name a family twice"),
     ("--families", "--families must name at least one of"),
     ("--families chain --sizes 7", "--sizes 7 is no size of the chosen families (chain: 5 10 20"),

@@ -107,6 +107,7 @@ def _files(run: Path) -> dict[str, list[str]]:
                 "blr__optimism": "until-reward",
                 "blr__calibrated_k_target": "cut",
                 "blr__rearm_episodes": 1,
+                "blr__switch_restart": "none",  # the targets kept (the next case restarts)
                 "k": 3,
                 "learning_starts": 100,
                 "batch_size": 24,

@@ -28,7 +28,7 @@ from typing import Annotated, Any, Literal
 import numpy as np
 
 from farsighter.config import Config
-from farsighter.envs.chain import SOLVED_RETURN, chain_id
+from farsighter.envs.chain import SOLVED_RETURN, chain_id, drift_chain_id
 from farsighter.envs.deep_sea import deep_sea_id
 from farsighter.errors import FarsighterError
 from farsighter.plots import figure, finish_axes, markdown_table
@@ -117,6 +117,7 @@ class Family:
 
 
 CHAIN_SIZES = (5, 10, 20, 30, 50)
+DRIFT_CHAIN_SIZES = (6, 10, 14, 20)
 _MINIGRID_SOLVED = (
     "MiniGrid pays 1 - 0.9 t/T for reaching the goal at step t of its step limit T and 0 "
     "otherwise, so a mean of 0.5 needs the goal reached in more than half of the evaluation "
@@ -232,6 +233,21 @@ FAMILIES: dict[str, Family] = {
         eval_every=100,  # one deterministic episode of at most L + 1 steps: cheap
         eval_episodes=1,
     ),
+    # issue #25's first report: the chain's lock, where a wrong move drifts one state back and
+    # the episode goes on to a time limit of L steps (deep sea's budget: every episode but a
+    # success lasts L steps)
+    "driftchain": Family(
+        size="chain length L",
+        sizes=DRIFT_CHAIN_SIZES,
+        env_ids=tuple(drift_chain_id(n) for n in DRIFT_CHAIN_SIZES),
+        budgets=tuple(budget_steps(n) for n in DRIFT_CHAIN_SIZES),
+        threshold=SOLVED_RETURN,
+        solved="the greedy episode reached the end of the chain, L right moves in a row (return "
+        "0.99; every other return is at most 0)",
+        goal=SOLVED_RETURN,
+        eval_every=tuple(max(100, 5 * n) for n in DRIFT_CHAIN_SIZES),  # one episode of L steps
+        eval_episodes=1,
+    ),
     "doorkey": _minigrid(
         "grid side",
         (5, 6, 8),
@@ -319,6 +335,10 @@ _ALWAYS = {"blr.optimism": "always"}
 Farsighter switches to the posterior mean's cut target at its first positive reward since
 docs/results/explore/until-reward-cut; the studies in docs/results that name them were made
 before, with the targets for the whole run)."""
+_KEPT = {"blr.switch_restart": "none"}
+"""Pinned by the agents measured when the posterior kept its optimistic targets at the switch
+(the general preset restarts it from its prior since session 37), so that their names still
+say what their results in docs/results are."""
 
 AGENTS: tuple[Agent, ...] = (
     Agent("DDQN", "ddqn"),
@@ -403,7 +423,7 @@ AGENTS: tuple[Agent, ...] = (
     Agent(
         "Farsighter (optimism until reward)",
         "farsighter",
-        {"blr.optimism": "until-reward", "blr.calibrated_k_target": "k"},
+        {"blr.optimism": "until-reward", "blr.calibrated_k_target": "k", **_KEPT},
     ),
     # the k-step target cut before the first exploratory action (Watkins), against the default's
     # larger of the k-step and the one-step target (whose upward bias is a bonus for not ending
@@ -417,18 +437,20 @@ AGENTS: tuple[Agent, ...] = (
         "farsighter",
         {"k_target": "cut", "blr.optimism": "until-reward"},
     ),
-    # the default's targets until the first positive reward, then the mean's target cut there:
-    # the defaults since docs/results/explore/until-reward-cut (the same config as "Farsighter")
+    # the default's targets until the first positive reward, then the mean's target cut there,
+    # the posterior keeping what it had summed: the defaults from
+    # docs/results/explore/until-reward-cut to session 36 (the targets kept at the switch)
     Agent(
         "Farsighter (optimism until reward, then cut)",
         "farsighter",
-        {"blr.optimism": "until-reward", "blr.calibrated_k_target": "cut"},
+        {"blr.optimism": "until-reward", "blr.calibrated_k_target": "cut", **_KEPT},
     ),
     # the cut only where the posterior is sure the action taken was worse (blr.cut_margin)
-    Agent("Farsighter (cut margin 1)", "farsighter", {"blr.cut_margin": 1.0}),
+    Agent("Farsighter (cut margin 1)", "farsighter", {"blr.cut_margin": 1.0, **_KEPT}),
     # the posterior restarted from its prior at the switch (blr.switch_restart prior): its mean
     # fit to the calibrated targets alone, its width the prior's again where the run has not been
-    # since; or its targets zeroed (zero-targets): the mean from 0, the width kept
+    # since; or its targets zeroed (zero-targets): the mean from 0, the width kept. The first is
+    # the default since session 37 (the same config as "Farsighter")
     Agent("Farsighter (switch restart)", "farsighter", {"blr.switch_restart": "prior"}),
     Agent(
         "Farsighter (switch restart, k-step)",
@@ -559,8 +581,8 @@ class Args(StudyArgs):
     most 3,000); bsuite itself runs 10,000, so --episodes 10000 scores bsuite's criterion over
     bsuite's whole run. --steps still caps."""
     families: Annotated[tuple[str, ...] | None, runner.study_flag("NAME [NAME ...]")] = None
-    """Task families: chain, doorkey, keycorridor, multiroom, mountaincar, acrobot, frozenlake,
-    deepsea, deepsea-stochastic."""
+    """Task families: chain, driftchain, doorkey, keycorridor, multiroom, mountaincar, acrobot,
+    frozenlake, deepsea, deepsea-stochastic."""
     sizes: Annotated[tuple[int, ...] | None, runner.study_flag("N [N ...]")] = None
     """Only these sizes of the chosen families (none given: every size)."""
 
