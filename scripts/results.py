@@ -527,6 +527,52 @@ ENTRIES = (
         398,
     ),
     Entry(
+        "explore/driftchain",
+        "explore --families driftchain --sizes 6 10 --agents DDQN Farsighter "
+        "'Farsighter (optimism until reward, then cut)' --workers 2",
+        "the drifting lock (a wrong move one state back): the defaults, the targets kept at the "
+        "switch (the defaults up to session 36) and DDQN",
+        144,
+    ),
+    Entry(
+        "explore/restart-deepsea",
+        "explore --families deepsea --sizes 10 14 --agents 'Farsighter (switch restart)' "
+        "--workers 2",
+        "the posterior restarted at the switch (the default since session 37), deep sea N = 10, 14",
+        362,
+    ),
+    Entry(
+        "explore/restart-deepsea20",
+        "explore --families deepsea --sizes 20 --agents 'Farsighter (switch restart)' --workers 2",
+        "the same, deep sea N = 20",
+        390,
+    ),
+    Entry(
+        "explore/zero-deepsea20",
+        "explore --families deepsea --sizes 20 --agents 'Farsighter (zero targets)' --workers 2",
+        "the targets zeroed at the switch instead, deep sea N = 20",
+        374,
+    ),
+    Entry(
+        "explore/restart-chain30-s37",
+        "explore --families chain --sizes 30 --agents 'Farsighter (switch restart)' --workers 2",
+        "the posterior restarted at the switch, the chain L = 30 (with the act_width default)",
+        136,
+    ),
+    Entry(
+        "explore/restart-frozenlake",
+        "explore --families frozenlake --sizes 4 --agents 'Farsighter (switch restart)' "
+        "--workers 2",
+        "the posterior restarted at the switch, FrozenLake 4 x 4",
+        512,
+    ),
+    Entry(
+        "explore/restart-empty5",
+        "explore --families empty --sizes 5 --agents 'Farsighter (switch restart)' --workers 2",
+        "the posterior restarted at the switch, MiniGrid Empty-5x5",
+        673,
+    ),
+    Entry(
         "minatar",
         "atari --games minatar --agents DDQN BDQN Farsighter --seeds 1 2 --steps 50000 "
         "--eval-every 10000 --eval-episodes 10",
