@@ -144,7 +144,8 @@ _FRESH_PER_ALGO: dict[str, dict[str, Any]] = {
 #   pays. CliffWalking (-100 off the edge): no training episode reached the goal in 30k steps
 #   with the posterior's width (2 of 2 seeds), the optimal path (-13) by 20k steps widened
 #   (3 of 3 seeds);
-#   Taxi (-10 for a wrong pickup): no delivery in 60k steps, widened 1 and 7. Where the gaps
+#   Taxi (-10 for a wrong pickup): no delivery in 60k steps, widened 1 and 7 (the targets
+#   kept at the switch; with the restart below 1 and 2). Where the gaps
 #   stay within the prior's width the run is the same, bit for bit (CartPole, Acrobot,
 #   FrozenLake, the 30-state chain, deep sea N = 20 and stochastic N = 10 measured)
 #   (docs/design.md "Draws as wide as the action gaps").
