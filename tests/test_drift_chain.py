@@ -18,15 +18,18 @@ from farsighter.envs.chain import drift_chain_id
 train_module = importlib.import_module("farsighter.train")
 
 
-def _train(tmp_path: Path, length: int, seed: int, **values: Any) -> dict[str, Any]:
-    """Farsighter with the defaults on the drifting lock of ``length``, 1,000 episodes (the
-    exploration suite's budget at these sizes), one greedy episode every 5 L steps."""
+def _train(
+    tmp_path: Path, length: int, seed: int, episodes: int = 1_000, **values: Any
+) -> dict[str, Any]:
+    """Farsighter with the defaults on the drifting lock of ``length`` for ``episodes`` episodes
+    (1,000: the exploration suite's budget at these sizes; every episode but a success lasts L
+    steps), one greedy episode every 100 L steps; the run's summary."""
     cfg = make_config(
         "farsighter",
         drift_chain_id(length),
         seed=seed,
-        total_steps=1_000 * length,
-        eval_every=5 * length * 20,
+        total_steps=episodes * length,
+        eval_every=100 * length,
         eval_episodes=1,
         torch_threads=1,
         progress=False,
@@ -61,18 +64,5 @@ def test_kept_targets_lose_the_drifting_lock(tmp_path: Path) -> None:
 def test_defaults_solve_the_drifting_lock_of_ten(tmp_path: Path, seed: int) -> None:
     """Issue #25's first report, L = 10 within 2^10 + 100 episodes: 5/5 seeds solved and held
     (docs/design.md "The drifting lock"); seeds 1 to 3 here, 1,124 episodes each."""
-    cfg_steps = 10 * 1_124
-    cfg = make_config(
-        "farsighter",
-        drift_chain_id(10),
-        seed=seed,
-        total_steps=cfg_steps,
-        eval_every=cfg_steps // 2,
-        eval_episodes=1,
-        torch_threads=1,
-        progress=False,
-        run_dir=str(tmp_path / f"L10-s{seed}"),
-    )
-    train_module.train(cfg)
-    summary = json.loads((Path(cfg.run_dir) / "summary.json").read_text())
+    summary = _train(tmp_path, 10, seed, episodes=1_124)
     assert summary["final_eval_return"] == pytest.approx(0.99), seed

@@ -748,7 +748,7 @@ def action_gap_scale(head: BLRHead, phi_BD: torch.Tensor) -> float:
     the prior over an untried action's value spans the values the actions take."""
     if phi_BD.shape[0] == 0:
         return 1.0
-    q_BA = phi_BD.to(torch.float32) @ head.mean_AD.T
+    q_BA = head.q_mean(phi_BD)
     gap = float((q_BA.max(dim=1).values - q_BA.min(dim=1).values).mean())
     return max(1.0, gap / head.prior_std) if math.isfinite(gap) else 1.0
 
