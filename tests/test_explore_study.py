@@ -222,6 +222,7 @@ def test_agents_are_one_config_each_on_the_auto_preset(tmp_path: Path) -> None:
         "Farsighter (switch restart, k-step)",
         "Farsighter (switch restart, cut margin 1)",
         "Farsighter (zero targets)",
+        "Farsighter (refit at switch)",
         "Farsighter (zero targets, cut margin 1)",
         "Farsighter (zero targets, cut delay 3)",
         "Farsighter (cut delay 3)",
@@ -261,6 +262,7 @@ def test_agents_are_one_config_each_on_the_auto_preset(tmp_path: Path) -> None:
         "Farsighter (switch restart, k-step)",
         "Farsighter (switch restart, cut margin 1)",
         "Farsighter (zero targets)",
+        "Farsighter (refit at switch)",
         "Farsighter (zero targets, cut margin 1)",
         "Farsighter (zero targets, cut delay 3)",
         "Farsighter (cut delay 3)",
@@ -273,7 +275,7 @@ def test_agents_are_one_config_each_on_the_auto_preset(tmp_path: Path) -> None:
     }
     assert not named_only & set(StudyConfig().agents)
     assert "Farsighter (redraw step)" in StudyConfig().agents
-    assert len(StudyConfig().agents) == len(AGENTS) - 35
+    assert len(StudyConfig().agents) == len(AGENTS) - 36
     every = [
         run_config(a, QUICK, 3, tmp_path, (chain_id(10), 10_000))
         for a in AGENTS

@@ -23,6 +23,7 @@ Q(s, a) = phi_theta(s)^T w_a with a Bayesian linear regression posterior over ea
 
 from __future__ import annotations
 
+from functools import partial
 from typing import Any
 
 import gymnasium as gym
@@ -52,6 +53,7 @@ from farsighter.agents.farsighter_posterior import (
     accumulate,
     make_head,
     refresh_posterior,
+    replay_rows,
     seeded_torso,
 )
 from farsighter.agents.learner import Learner, make_target_cache
@@ -151,9 +153,18 @@ class FarsighterAgent:
         posterior restarts (``blr.switch_restart``; ``restart = False``: a checkpoint's
         statistics, loaded, are kept). ``on = False``: back to the optimism (rearmed)."""
         self.loss.calibrate(on)
-        if restart and on:
-            restart_at_switch(self.cfg, self.head, self.loss.target_mean_AD)
         self.replay.cut_exploratory = self.loss.k_target == "cut"
+        if restart and on:
+            rows = partial(
+                replay_rows,
+                self.replay,
+                self.cfg,
+                self.counters.k,
+                self.device,
+                self.torso,
+                self.loss.torso_target,
+            )
+            restart_at_switch(self.cfg, self.head, self.loss.target_mean_AD, rows)
 
     # ------------------------------------------------------------------ learning
     def learn(self, global_step: int) -> dict[str, torch.Tensor]:

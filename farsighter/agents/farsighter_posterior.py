@@ -24,10 +24,12 @@ from farsighter.agents.common import (
 from farsighter.config import Config
 from farsighter.networks import MLPTorso, RandomFeatureTorso, Torso, make_torso
 from farsighter.ops.blr import BLRHead, action_gap_scale, greedy_predictive_variance
+from farsighter.ops.refit import ReplayRows
 from farsighter.replay import ReplayBuffer
 
 FEATURE_CHUNK = 4_096  # rows per forward pass when computing features for a posterior refresh
 RECENT_FEATURES = 2_048  # incremental mode: minibatch features kept for adaptive k's Q-variance
+REFIT_ROWS = 50_000  # blr.switch_restart refit: the latest rows of the replay it fits
 
 
 @dataclass
@@ -191,3 +193,40 @@ def refresh_rows(
         empty = torch.zeros(0, device=device)
         return empty, empty.long(), empty
     return torch.cat(phis), torch.cat(actions), torch.cat(ys)
+
+
+@torch.no_grad()
+def replay_rows(
+    replay: ReplayBuffer,
+    cfg: Config,
+    k: int,
+    device: torch.device,
+    torso: Callable[[torch.Tensor], torch.Tensor],
+    torso_target: Callable[[torch.Tensor], torch.Tensor],
+    streams: slice = slice(None),
+) -> ReplayRows:
+    """The valid k-step windows of the latest ``REFIT_ROWS`` rows of ``replay``'s ``streams``
+    (cut where the replay cuts them), with phi(s) of ``torso`` and phi_target(s') of
+    ``torso_target``: what ``blr.switch_restart = refit`` fits (:func:`farsighter.ops.refit.
+    refit`)."""
+    e_N, l_N = replay.recent_indices(REFIT_ROWS, streams)
+    parts = []
+    for lo in range(0, len(e_N), FEATURE_CHUNK):
+        part = replay.sample_indices(
+            e_N[lo : lo + FEATURE_CHUNK],
+            l_N[lo : lo + FEATURE_CHUNK],
+            k,
+            cfg.gamma,
+            stride=k if cfg.stride else 1,
+            on_device=True,
+        )
+        if len(part.actions) == 0:
+            continue
+        t = batch_tensors(part, device)
+        phi = torso(t.obs_B).double()
+        parts.append((phi, t.actions_B, t.returns_B, t.bootstrap_B, torso_target(t.next_obs_B)))
+    if not parts:
+        empty = torch.zeros(0, device=device)
+        return ReplayRows(empty[:, None].double(), empty.long(), empty, empty, empty[:, None])
+    phi, actions, returns, bootstrap, phi_next = (torch.cat(x) for x in zip(*parts, strict=True))
+    return ReplayRows(phi, actions, returns, bootstrap, phi_next)

@@ -43,6 +43,7 @@ from farsighter.agents.farsighter_parts import SeedParts
 from farsighter.agents.farsighter_posterior import (
     accumulate,
     refresh_posterior,
+    replay_rows,
     seeded_torso,
 )
 from farsighter.agents.seed_members import FarsighterSeedMember, seed_replay, stack_refusal
@@ -139,9 +140,12 @@ class SeedBatchFarsighter:
     def calibrate(self, s: int, restart: bool = True, on: bool = True) -> None:
         """Seed ``s``'s switch (``FarsighterAgent.calibrate``): its targets, its streams' windows
         cut where its calibrated target is cut, and its posterior's restart."""
-        p = self.parts[s]
-        p.calibrate(restart, on)
-        self.replay.cut_E[self.replay.seed_streams(s)] = p.k_target == "cut"
+        p, streams = self.parts[s], self.replay.seed_streams(s)
+        cut = optimism.calibrated(self.cfg.blr, self.cfg.k_target, on)[1] == "cut"
+        self.replay.cut_E[streams] = cut  # before a refit reads the windows
+        own, target = (partial(net.member_forward, s=s) for net in (self.torso, self.torso_target))
+        args = (self.cfg, p.counters.k, self.device, own, target, streams)
+        p.calibrate(restart, on, partial(replay_rows, self.replay, *args))
 
     # ------------------------------------------------------------------ learning
     def learn(self, global_step: int) -> list[dict[str, torch.Tensor]]:
@@ -278,18 +282,9 @@ class SeedBatchFarsighter:
             draws = p.draws(len(t.actions_B), False)
             return p.y(t, self.torso.member_forward(t.next_obs_B, s), phi_next_target, draws)
 
-        refresh_posterior(
-            cfg,
-            p.head,
-            p.counters,
-            p.recent_phi,
-            self.replay,
-            p.rng,
-            self.device,
-            lambda obs: self.torso.member_forward(obs, s),
-            targets,
-            self.replay.seed_streams(s),
-        )
+        own = partial(self.torso.member_forward, s=s)
+        args = (p.head, p.counters, p.recent_phi, self.replay, p.rng, self.device, own, targets)
+        refresh_posterior(cfg, *args, self.replay.seed_streams(s))
 
     # ------------------------------------------------------------------ one seed
     def member(self, s: int) -> FarsighterSeedMember:

@@ -83,7 +83,7 @@ class BLRConfig:
     5/5, held 1/5, docs/results/explore/until-reward). cut: the return stopped before the first
     exploratory action (``Config.k_target = cut``; the run records which actions were from its
     start). Our extension."""
-    switch_restart: Literal["none", "prior", "zero-targets"] = "none"
+    switch_restart: Literal["none", "prior", "zero-targets", "refit"] = "none"
     """With ``optimism = until-reward`` and ``mode = incremental``: what the posterior keeps of
     the optimistic targets at the switch. Its running statistics never forget, and every target
     they hold from before the switch carried the optimism (a bonus for every step that does not

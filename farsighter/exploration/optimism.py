@@ -10,6 +10,7 @@ those actions (:func:`exploratory_actions`) and the replay keeps the flag with t
 from __future__ import annotations
 
 import dataclasses
+from collections.abc import Callable
 
 import numpy as np
 import torch
@@ -17,6 +18,7 @@ import torch
 from farsighter.config import BLRConfig, Config
 from farsighter.config.fields import KTarget
 from farsighter.ops.blr import BLRHead
+from farsighter.ops.refit import ReplayRows, refit
 
 
 def calibrated(blr: BLRConfig, k_target: KTarget, on: bool = True) -> tuple[BLRConfig, KTarget]:
@@ -76,17 +78,29 @@ def cut_relative(cfg: Config) -> float:
     return cfg.blr.cut_delay * (1.0 - cfg.gamma)
 
 
-def restart_at_switch(cfg: Config, head: BLRHead, target_mean_AD: torch.Tensor) -> None:
+def restart_at_switch(
+    cfg: Config,
+    head: BLRHead,
+    target_mean_AD: torch.Tensor,
+    rows: Callable[[], ReplayRows] | None = None,
+) -> None:
     """``blr.switch_restart`` at the switch: the posterior back to its prior
-    (:meth:`BLRHead.restart`, ``prior``) or its rows kept without their targets
-    (:meth:`BLRHead.forget_targets`, ``zero-targets``), and the targets' mean with it, so every
-    value the optimism inflated starts again from 0."""
-    if cfg.blr.switch_restart == "none" or cfg.blr.mode != "incremental":
+    (:meth:`BLRHead.restart`, ``prior``), its rows kept without their targets
+    (:meth:`BLRHead.forget_targets`, ``zero-targets``), or refitted to the replay's ``rows``
+    by fitted Q-iteration from the prior (:func:`farsighter.ops.refit.refit`, ``refit``: each
+    row weighs a step's ``data_weight``); the targets' mean with it, so every value the optimism
+    inflated starts again from what the rewards give."""
+    mode = cfg.blr.switch_restart
+    if mode == "none" or cfg.blr.mode != "incremental":
         return
-    if cfg.blr.switch_restart == "prior":
-        head.restart()
-    else:
+    if mode == "zero-targets":
         head.forget_targets()
+    else:
+        head.restart()
+        if mode == "refit":
+            if rows is None:
+                raise ValueError("blr.switch_restart refit needs the replay's rows")
+            refit(head, rows(), cfg.blr.data_weight, count=cfg.batch_size / cfg.train_every)
     target_mean_AD.copy_(head.mean_AD)
 
 

@@ -463,6 +463,9 @@ AGENTS: tuple[Agent, ...] = (
         {"blr.switch_restart": "prior", "blr.cut_margin": 1.0},
     ),
     Agent("Farsighter (zero targets)", "farsighter", {"blr.switch_restart": "zero-targets"}),
+    # or refitted to the replay by fitted Q-iteration (blr.switch_restart refit): the values the
+    # rewards confirm (the found path, the learned penalties) without the optimism's
+    Agent("Farsighter (refit at switch)", "farsighter", {"blr.switch_restart": "refit"}),
     Agent(
         "Farsighter (zero targets, cut margin 1)",
         "farsighter",
@@ -541,6 +544,7 @@ _NAMED_ONLY = (
     "Farsighter (no optimism in place, redraw revisit)",
     "Farsighter (no optimism in place, zero targets, cut delay 3)",
     "Farsighter (posterior width)",
+    "Farsighter (refit at switch)",
 )
 DEFAULT_AGENTS = tuple(a.label for a in AGENTS if a.label not in _NAMED_ONLY)
 """The default list: every agent once but those run only when named. "Farsighter (redraw k)" and

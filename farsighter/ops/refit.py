@@ -1,0 +1,114 @@
+"""The posterior refitted to a replay by fitted Q-iteration (``blr.switch_restart = refit``).
+
+At ``blr.optimism``'s switch every target the posterior's statistics hold carried the optimism.
+Instead of restarting from the prior (and waiting for minibatches to bring the found reward back,
+a few of its samples at a time), the posterior can be refitted to the transitions the run has:
+the rows' features phi(s) weighed as the statistics weigh a step, and their targets, the
+calibrated Bellman targets y = r^k + gamma^k max_a phi_target(s')^T w_a, taken under the fit's own
+mean and fitted again until they settle (fitted Q-iteration, Ernst et al. 2005, on a ridge
+regression with fixed features). What the rewards confirm stays (the found path, the learned
+penalties); what the optimism added goes.
+
+The features do not change while it iterates, so Phi Phi^T and the Cholesky factor of the
+precision are formed once; each iteration is one product for the targets, one per action for
+Phi y and a triangular solve: O(n d |A|), against O(|A| d^3) for a refresh.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import torch
+
+from farsighter.ops.blr import BLRHead, cholesky_jitter
+
+REFIT_ITERATIONS = 200
+"""Most iterations: each carries a value back by one window (k steps, fewer where cut)."""
+
+REFIT_TOLERANCE = 1e-4
+"""Iterations stop when no target moved by more than this times max(1, the largest |target|)."""
+
+
+@dataclass
+class ReplayRows:
+    """The k-step windows a refit fits: phi(s) (float64), the action, r^k, the bootstrap factor
+    gamma^k (0 after a terminal) and phi_target(s') of each row."""
+
+    phi_ND: torch.Tensor
+    action_N: torch.Tensor
+    returns_N: torch.Tensor
+    bootstrap_N: torch.Tensor
+    phi_next_ND: torch.Tensor
+
+    def __len__(self) -> int:
+        return int(self.action_N.shape[0])
+
+
+def bellman_targets(rows: ReplayRows, mean_AD: torch.Tensor) -> torch.Tensor:
+    """y = r^k + gamma^k max_a phi_target(s')^T mean_a of every row (float64)."""
+    q_NA = rows.phi_next_ND @ mean_AD.to(rows.phi_next_ND.dtype).T
+    return rows.returns_N.double() + rows.bootstrap_N.double() * q_NA.max(dim=1).values.double()
+
+
+@torch.no_grad()
+def refit(
+    head: BLRHead,
+    rows: ReplayRows,
+    weight: float,
+    count: float = 1.0,
+    max_iterations: int = REFIT_ITERATIONS,
+    tol: float = REFIT_TOLERANCE,
+) -> int:
+    """Replace the head's statistics by the rows' (each weighing ``weight`` and counting
+    ``count`` rows, as the statistics count a step) with targets fitted by fitted Q-iteration
+    from the head's current mean, then refresh; returns the iterations.
+
+    Each iteration takes the targets under the latest mean and solves for the next mean, which
+    is the mean :meth:`BLRHead.refresh` gives from the same statistics (the precision's factor is
+    formed once). It stops when the targets settle, after ``max_iterations``, or when a target
+    grows past the rows' largest |return| over 1 - gamma^k's smallest (what no fixed point of
+    these rows reaches: a fit that diverges), keeping the last iteration within that bound.
+    """
+    if weight <= 0:
+        raise ValueError(f"weight must be > 0, got {weight}")
+    head.reset_statistics()
+    if len(rows) == 0:
+        head.refresh()
+        return 0
+    a_N = rows.action_N.to(head.device, torch.long)
+    order_N = torch.argsort(a_N, stable=True)  # each action's rows in one slice, in their order
+    a_N = a_N[order_N]
+    rows = ReplayRows(
+        rows.phi_ND[order_N].to(head.device, head.stats_dtype),
+        a_N,
+        rows.returns_N[order_N],
+        rows.bootstrap_N[order_N],
+        rows.phi_next_ND[order_N],
+    )
+    ends = torch.bincount(a_N, minlength=head.num_actions).cumsum(0).tolist()
+    spans = [slice(lo, hi) for lo, hi in zip([0, *ends[:-1]], ends, strict=True)]
+    y_N = bellman_targets(rows, head.mean_AD).to(head.stats_dtype)
+    root = weight**0.5
+    head.accumulate(rows.phi_ND * root, a_N, y_N * root)
+    head.count_A.mul_(count)  # (the residual scale divides the weighted sums by the count)
+    noise2, prior2 = head.noise_std**2, head.prior_std**2
+    eye_DD = torch.eye(head.dim, dtype=head.stats_dtype, device=head.device)
+    l_ADD, _ = cholesky_jitter(head.phiphiT_ADD / noise2 + eye_DD / prior2)
+    bound = float(rows.returns_N.abs().max()) / max(1.0 - float(rows.bootstrap_N.max()), 1e-6)
+    iterations = 0
+    while iterations < max_iterations:
+        mean_AD = torch.cholesky_solve((head.phiy_AD / noise2).unsqueeze(-1), l_ADD).squeeze(-1)
+        new_N = bellman_targets(rows, mean_AD).to(head.stats_dtype)
+        largest = float(new_N.abs().max())
+        if not largest <= max(bound, 1.0) * 1.01:  # diverging (or NaN): keep the last fit
+            break
+        iterations += 1
+        moved = float((new_N - y_N).abs().max())
+        y_N = new_N
+        for a, span in enumerate(spans):  # Phi_a y_a and y_a^T y_a of the new targets
+            head.phiy_AD[a] = (rows.phi_ND[span].T @ y_N[span]) * weight
+            head.yy_A[a] = y_N[span].square().sum() * weight
+        if moved <= tol * max(1.0, largest):
+            break
+    head.refresh()
+    return iterations
