@@ -113,15 +113,15 @@ def _files(run: Path) -> dict[str, list[str]]:
                 "batch_size": 24,
             },
         ),
-        # the switch with the posterior restarted from its prior (each seed's own head and
-        # target mean) and the plain k-step target after it
+        # the switch with the posterior refitted to each seed's own replay (its streams, cut
+        # before its exploratory actions, through its own torsos; blr.switch_restart refit,
+        # which restarts from the prior first) and the target cut after it
         (
             "farsighter",
             "farsighter/Chain8-v0",
             {
                 "preset": "general",
-                "blr__switch_restart": "prior",
-                "blr__calibrated_k_target": "k",
+                "blr__switch_restart": "refit",
                 "k": 3,
                 "learning_starts": 100,
                 "batch_size": 24,

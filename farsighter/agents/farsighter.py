@@ -162,7 +162,6 @@ class FarsighterAgent:
                 self.counters.k,
                 self.device,
                 self.torso,
-                self.loss.torso_target,
             )
             restart_at_switch(self.cfg, self.head, self.loss.target_mean_AD, rows)
 

@@ -202,13 +202,14 @@ def replay_rows(
     k: int,
     device: torch.device,
     torso: Callable[[torch.Tensor], torch.Tensor],
-    torso_target: Callable[[torch.Tensor], torch.Tensor],
     streams: slice = slice(None),
 ) -> ReplayRows:
     """The valid k-step windows of the latest ``REFIT_ROWS`` rows of ``replay``'s ``streams``
-    (cut where the replay cuts them), with phi(s) of ``torso`` and phi_target(s') of
-    ``torso_target``: what ``blr.switch_restart = refit`` fits (:func:`farsighter.ops.refit.
-    refit`)."""
+    (cut where the replay cuts them), with phi(s) and phi(s') of ``torso``: what
+    ``blr.switch_restart = refit`` fits (:func:`farsighter.ops.refit.refit`). One feature map
+    for both: a fit iterated to its fixed point on the online features and read at the target
+    torso's (which lag them) extrapolates, and its values climbed past any return (the drifting
+    lock L = 10: every Q above 1, up to 3.4, for a reward of 1)."""
     e_N, l_N = replay.recent_indices(REFIT_ROWS, streams)
     parts = []
     for lo in range(0, len(e_N), FEATURE_CHUNK):
@@ -224,7 +225,7 @@ def replay_rows(
             continue
         t = batch_tensors(part, device)
         phi = torso(t.obs_B).double()
-        parts.append((phi, t.actions_B, t.returns_B, t.bootstrap_B, torso_target(t.next_obs_B)))
+        parts.append((phi, t.actions_B, t.returns_B, t.bootstrap_B, torso(t.next_obs_B)))
     if not parts:
         empty = torch.zeros(0, device=device)
         return ReplayRows(empty[:, None].double(), empty.long(), empty, empty, empty[:, None])

@@ -143,8 +143,8 @@ class SeedBatchFarsighter:
         p, streams = self.parts[s], self.replay.seed_streams(s)
         cut = optimism.calibrated(self.cfg.blr, self.cfg.k_target, on)[1] == "cut"
         self.replay.cut_E[streams] = cut  # before a refit reads the windows
-        own, target = (partial(net.member_forward, s=s) for net in (self.torso, self.torso_target))
-        args = (self.cfg, p.counters.k, self.device, own, target, streams)
+        own = partial(self.torso.member_forward, s=s)
+        args = (self.cfg, p.counters.k, self.device, own, streams)
         p.calibrate(restart, on, partial(replay_rows, self.replay, *args))
 
     # ------------------------------------------------------------------ learning

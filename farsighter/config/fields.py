@@ -93,7 +93,12 @@ class BLRConfig:
     sigma_eps and the prior sigma as configured, mean 0 at the prior's width) and the targets'
     mean with it. zero-targets: the rows but not their targets (the sums of y set to 0, as if
     every earlier target had been 0), so the mean restarts at 0 and the width stays what the
-    rows made it. The learned features and the replay are kept in every case. Measured
+    rows made it. refit: from the prior, the posterior refitted to the latest 50,000 rows of the
+    replay (each weighing a step's ``data_weight``) with the calibrated targets iterated to
+    their fixed point (fitted Q-iteration, at most 200 iterations): what the rewards confirm
+    (the found path, learned penalties) stays, the optimism goes; a paid step whose episode goes
+    on has no next state yet and comes with the minibatches after. The learned features and the
+    replay are kept in every case. Measured
     (docs/design.md "What the switch keeps"): with the default cut at margin 0 a restart leaves
     DoorKey-5x5 unsolved; zero-targets with ``cut_margin`` 1 solves and holds it in both seeds
     that switch, but holds the chain L = 30 in 2/5. On the drifting lock (a wrong move one state

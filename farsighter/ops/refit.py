@@ -4,10 +4,10 @@ At ``blr.optimism``'s switch every target the posterior's statistics hold carrie
 Instead of restarting from the prior (and waiting for minibatches to bring the found reward back,
 a few of its samples at a time), the posterior can be refitted to the transitions the run has:
 the rows' features phi(s) weighed as the statistics weigh a step, and their targets, the
-calibrated Bellman targets y = r^k + gamma^k max_a phi_target(s')^T w_a, taken under the fit's own
-mean and fitted again until they settle (fitted Q-iteration, Ernst et al. 2005, on a ridge
-regression with fixed features). What the rewards confirm stays (the found path, the learned
-penalties); what the optimism added goes.
+calibrated Bellman targets y = r^k + gamma^k max_a phi(s')^T w_a (the same features at s and
+s'), taken under the fit's own mean and fitted again until they settle (fitted Q-iteration,
+Ernst et al. 2005, on a ridge regression with fixed features). What the rewards confirm stays
+(the found path, the learned penalties); what the optimism added goes.
 
 The features do not change while it iterates, so Phi Phi^T and the Cholesky factor of the
 precision are formed once; each iteration is one product for the targets, one per action for
@@ -32,7 +32,7 @@ REFIT_TOLERANCE = 1e-4
 @dataclass
 class ReplayRows:
     """The k-step windows a refit fits: phi(s) (float64), the action, r^k, the bootstrap factor
-    gamma^k (0 after a terminal) and phi_target(s') of each row."""
+    gamma^k (0 after a terminal) and phi(s') of each row."""
 
     phi_ND: torch.Tensor
     action_N: torch.Tensor
@@ -45,7 +45,7 @@ class ReplayRows:
 
 
 def bellman_targets(rows: ReplayRows, mean_AD: torch.Tensor) -> torch.Tensor:
-    """y = r^k + gamma^k max_a phi_target(s')^T mean_a of every row (float64)."""
+    """y = r^k + gamma^k max_a phi(s')^T mean_a of every row (float64)."""
     q_NA = rows.phi_next_ND @ mean_AD.to(rows.phi_next_ND.dtype).T
     return rows.returns_N.double() + rows.bootstrap_N.double() * q_NA.max(dim=1).values.double()
 

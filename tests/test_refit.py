@@ -1,0 +1,146 @@
+"""blr.switch_restart refit: the posterior refitted to the replay by fitted Q-iteration at the
+switch (farsighter/ops/refit.py), against value iteration on a tabular chain, and in the agent."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import numpy as np
+import pytest
+import torch
+
+from farsighter.ops.blr import BLRHead
+from farsighter.ops.refit import ReplayRows, bellman_targets, refit
+from farsighter.replay import VectorStep
+from tests.test_exploration_defaults import make_agent
+
+GAMMA = 0.9
+
+
+def chain_rows(n: int) -> tuple[ReplayRows, np.ndarray]:
+    """Every (state, action) of a deterministic chain of ``n`` states, one-hot features per
+    action: action 1 moves right (from the last state it ends the episode with reward 1),
+    action 0 goes back to state 0 with reward 0.1. Returns the rows and Q* by value iteration."""
+    phi, act, ret, boot, nxt = [], [], [], [], []
+    eye = np.eye(n)
+    for s in range(n):
+        for a in (0, 1):
+            end = a == 1 and s == n - 1
+            s2 = 0 if a == 0 else min(s + 1, n - 1)
+            phi.append(eye[s])
+            act.append(a)
+            ret.append(1.0 if end else (0.1 if a == 0 else 0.0))
+            boot.append(0.0 if end else GAMMA)
+            nxt.append(eye[s2])
+    q = np.zeros((n, 2))
+    for _ in range(2000):  # value iteration to its fixed point
+        v = q.max(axis=1)
+        for i in range(len(act)):
+            s, a = int(np.argmax(phi[i])), act[i]
+            q[s, a] = ret[i] + boot[i] * v[int(np.argmax(nxt[i]))]
+    rows = ReplayRows(
+        torch.tensor(np.array(phi), dtype=torch.float64),
+        torch.tensor(act),
+        torch.tensor(ret, dtype=torch.float32),
+        torch.tensor(boot, dtype=torch.float32),
+        torch.tensor(np.array(nxt), dtype=torch.float32),
+    )
+    return rows, q
+
+
+def tabular_head(n: int) -> BLRHead:
+    return BLRHead(num_actions=2, dim=n, prior_std=1.0, noise_std=1.0)
+
+
+def test_refit_reaches_the_q_values_of_value_iteration() -> None:
+    """With each row weighing far more than the prior's ridge, the fitted Q-iteration's fixed
+    point is Q* of the chain (the long way round: 0.1 now against 1 after n steps)."""
+    n = 6
+    rows, q_star = chain_rows(n)
+    head = tabular_head(n)
+    iterations = refit(head, rows, weight=1e6, count=3.0)
+    assert 0 < iterations < 200
+    q = head.mean_AD.T.double().numpy()  # one-hot features: w_a[s] is Q(s, a)
+    np.testing.assert_allclose(q, q_star, atol=2e-3)
+    assert (q.argmax(axis=1) == q_star.argmax(axis=1)).all()
+    # the statistics are those of the rows (each counted as `count` rows) and their final
+    # targets, so the head's own refresh gives this mean
+    assert float(head.count_A.sum()) == pytest.approx(3.0 * len(rows))
+    y = bellman_targets(rows, head.mean_AD)
+    np.testing.assert_allclose(head.phiy_AD.T.numpy().max(axis=0), 1e6 * y.numpy().max(), rtol=1e-3)
+
+
+def test_each_iteration_carries_a_value_back_one_window() -> None:
+    """From the prior (mean 0) the first fit sees the rewards alone; each iteration takes the
+    end's reward one state further back."""
+    n = 6
+    rows, _ = chain_rows(n)
+    for iterations in (1, 3):
+        head = tabular_head(n)
+        assert refit(head, rows, weight=1e6, max_iterations=iterations) == iterations
+        right = head.mean_AD[1].double().numpy()  # Q(s, right)
+        reached = [s for s in range(n) if right[s] > 0.5 * GAMMA ** (n - 1 - s)]
+        assert reached == list(range(n - 1 - iterations, n)), right
+
+
+def test_a_diverging_fit_stops_within_its_bound() -> None:
+    """One feature, phi = 1 at s and 2 at s': least squares over the two rows moves the weight
+    by 6 gamma / 5 > 1 each iteration (Tsitsiklis and Van Roy's divergence). The refit stops
+    before its targets pass what no fixed point of these rows reaches, |r| / (1 - gamma)."""
+    rows = ReplayRows(
+        torch.tensor([[1.0], [2.0]], dtype=torch.float64),
+        torch.tensor([0, 0]),
+        torch.tensor([0.0, 1.0]),
+        torch.tensor([0.99, 0.99]),
+        torch.tensor([[2.0], [2.0]]),
+    )
+    head = BLRHead(num_actions=1, dim=1, prior_std=1.0, noise_std=1.0)
+    iterations = refit(head, rows, weight=1e4)
+    assert 5 < iterations < 200
+    assert bool(torch.isfinite(head.mean_AD).all())
+    assert float(bellman_targets(rows, head.mean_AD).abs().max()) <= 101.0 * 1.2
+
+
+def test_the_switch_refits_the_posterior_to_the_replay(tmp_path: Path) -> None:
+    """blr.switch_restart refit: at the first positive reward the statistics are the replay's
+    rows (each counted as the statistics count a step), the targets' mean is the fit's, and the
+    paid step's value is learned at once; a restart from the prior knows nothing of it."""
+    values = {
+        "blr.mode": "incremental",
+        "blr.optimism": "until-reward",
+        "blr.data_weight": 100.0,
+        "k": 1,
+        "batch_size": 4,
+        "train_every": 2,
+    }
+    eye = np.eye(4, dtype=np.float32)
+    agents = {
+        m: make_agent(tmp_path / m, **values, **{"blr.switch_restart": m})
+        for m in ("refit", "prior")
+    }
+    for agent in agents.values():
+        for t in range(13):  # three observations in turn, then a fourth that pays and ends it
+            obs = eye[3 if t == 12 else t % 3][None]
+            action = agent.act(obs, t)
+            end, reward = t == 12, 1.0 if t == 12 else 0.0
+            step = VectorStep(
+                obs,
+                action,
+                np.array([reward]),
+                np.array([end]),
+                np.array([False]),
+                [eye[0]] if end else None,
+            )
+            agent.observe(step)
+            if t < 12:
+                agent.update()
+        assert agent.loss.calibrated
+    refitted, prior = agents["refit"], agents["prior"]
+    rows = 13  # every step's one-step window, the paid one's ended by its terminal
+    assert float(refitted.head.count_A.sum()) == pytest.approx(rows * 4 / 2)
+    torch.testing.assert_close(refitted.loss.target_mean_AD, refitted.head.mean_AD)
+    assert float(prior.head.count_A.sum()) == 0 and not prior.head.mean_AD.any()
+    # the paid step's value, learned at once; the prior has no values at all
+    q_refit, _ = refitted.q_estimate(eye)
+    paid = int(refitted.replay.actions[0, 12])
+    assert q_refit[3, paid] > 0.3 and q_refit[3, paid] == q_refit.max(), q_refit
