@@ -573,6 +573,21 @@ ENTRIES = (
         673,
     ),
     Entry(
+        "explore/refit-deepsea-driftchain",
+        "explore --families driftchain deepsea --sizes 10 14 20 --agents "
+        "'Farsighter (refit at switch)' --workers 2",
+        "the posterior refitted to the replay at the switch (the default since session 38), "
+        "the drifting lock and deep sea at 10, 14 and 20",
+        956,
+    ),
+    Entry(
+        "explore/refit-tasks",
+        "explore --families chain frozenlake deepsea-stochastic --sizes 30 4 10 --agents "
+        "'Farsighter (refit at switch)' --workers 2",
+        "the same, the chain L = 10 and 30, FrozenLake 4 x 4 and stochastic deep sea N = 10",
+        460,
+    ),
+    Entry(
         "minatar",
         "atari --games minatar --agents DDQN BDQN Farsighter --seeds 1 2 --steps 50000 "
         "--eval-every 10000 --eval-episodes 10",

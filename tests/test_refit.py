@@ -133,7 +133,7 @@ def test_the_switch_refits_the_posterior_to_the_replay(tmp_path: Path) -> None:
             )
             agent.observe(step)
             if t < 12:
-                agent.update()
+                agent.learn(t)  # updates from step 0 (learning_starts 0)
         assert agent.loss.calibrated
     refitted, prior = agents["refit"], agents["prior"]
     rows = 13  # every step's one-step window, the paid one's ended by its terminal
@@ -142,5 +142,34 @@ def test_the_switch_refits_the_posterior_to_the_replay(tmp_path: Path) -> None:
     assert float(prior.head.count_A.sum()) == 0 and not prior.head.mean_AD.any()
     # the paid step's value, learned at once; the prior has no values at all
     q_refit, _ = refitted.q_estimate(eye)
+    assert refitted.counters.updates > 0
     paid = int(refitted.replay.actions[0, 12])
     assert q_refit[3, paid] > 0.3 and q_refit[3, paid] == q_refit.max(), q_refit
+
+
+def test_a_switch_before_any_update_restarts_from_the_prior(tmp_path: Path) -> None:
+    """Before the first update the features are the initial network's: the refit falls back to
+    the prior (statistics zeroed, mean 0)."""
+    agent = make_agent(
+        tmp_path,
+        **{
+            "blr.mode": "incremental",
+            "blr.optimism": "until-reward",
+            "blr.switch_restart": "refit",
+        },
+    )
+    obs = np.eye(4, dtype=np.float32)[:1]
+    for t in range(5):
+        end = t == 4
+        agent.observe(
+            VectorStep(
+                obs,
+                agent.act(obs, t),
+                np.array([1.0 if end else 0.0]),
+                np.array([end]),
+                np.array([False]),
+                [obs[0]] if end else None,
+            )
+        )
+    assert agent.loss.calibrated and agent.counters.updates == 0
+    assert float(agent.head.count_A.sum()) == 0 and not agent.head.mean_AD.any()

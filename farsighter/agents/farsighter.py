@@ -154,15 +154,9 @@ class FarsighterAgent:
         statistics, loaded, are kept). ``on = False``: back to the optimism (rearmed)."""
         self.loss.calibrate(on)
         self.replay.cut_exploratory = self.loss.k_target == "cut"
-        if restart and on:
-            rows = partial(
-                replay_rows,
-                self.replay,
-                self.cfg,
-                self.counters.k,
-                self.device,
-                self.torso,
-            )
+        if restart and on:  # a refit reads features trained on the replay, else the prior
+            args = (self.replay, self.cfg, self.counters.k, self.device, self.torso)
+            rows = partial(replay_rows, *args) if self.counters.updates else None
             restart_at_switch(self.cfg, self.head, self.loss.target_mean_AD, rows)
 
     # ------------------------------------------------------------------ learning

@@ -145,7 +145,9 @@ class SeedBatchFarsighter:
         self.replay.cut_E[streams] = cut  # before a refit reads the windows
         own = partial(self.torso.member_forward, s=s)
         args = (self.cfg, p.counters.k, self.device, own, streams)
-        p.calibrate(restart, on, partial(replay_rows, self.replay, *args))
+        p.calibrate(
+            restart, on, partial(replay_rows, self.replay, *args) if p.counters.updates else None
+        )
 
     # ------------------------------------------------------------------ learning
     def learn(self, global_step: int) -> list[dict[str, torch.Tensor]]:

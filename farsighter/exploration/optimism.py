@@ -88,7 +88,8 @@ def restart_at_switch(
     (:meth:`BLRHead.restart`, ``prior``), its rows kept without their targets
     (:meth:`BLRHead.forget_targets`, ``zero-targets``), or refitted to the replay's ``rows``
     by fitted Q-iteration from the prior (:func:`farsighter.ops.refit.refit`, ``refit``: each
-    row weighs a step's ``data_weight``); the targets' mean with it, so every value the optimism
+    row weighs a step's ``data_weight``; from the prior alone where ``rows`` is None, a switch
+    before the features were trained); the targets' mean with it, so every value the optimism
     inflated starts again from what the rewards give."""
     mode = cfg.blr.switch_restart
     if mode == "none" or cfg.blr.mode != "incremental":
@@ -97,9 +98,7 @@ def restart_at_switch(
         head.forget_targets()
     else:
         head.restart()
-        if mode == "refit":
-            if rows is None:
-                raise ValueError("blr.switch_restart refit needs the replay's rows")
+        if mode == "refit" and rows is not None:  # (None: no features trained yet)
             refit(head, rows(), cfg.blr.data_weight, count=cfg.batch_size / cfg.train_every)
     target_mean_AD.copy_(head.mean_AD)
 

@@ -449,8 +449,8 @@ AGENTS: tuple[Agent, ...] = (
     Agent("Farsighter (cut margin 1)", "farsighter", {"blr.cut_margin": 1.0, **_KEPT}),
     # the posterior restarted from its prior at the switch (blr.switch_restart prior): its mean
     # fit to the calibrated targets alone, its width the prior's again where the run has not been
-    # since; or its targets zeroed (zero-targets): the mean from 0, the width kept. The first is
-    # the default since session 37 (the same config as "Farsighter")
+    # since; or its targets zeroed (zero-targets): the mean from 0, the width kept. The first was
+    # the default in session 37
     Agent("Farsighter (switch restart)", "farsighter", {"blr.switch_restart": "prior"}),
     Agent(
         "Farsighter (switch restart, k-step)",
@@ -464,7 +464,8 @@ AGENTS: tuple[Agent, ...] = (
     ),
     Agent("Farsighter (zero targets)", "farsighter", {"blr.switch_restart": "zero-targets"}),
     # or refitted to the replay by fitted Q-iteration (blr.switch_restart refit): the values the
-    # rewards confirm (the found path, the learned penalties) without the optimism's
+    # rewards confirm (the found path, the learned penalties) without the optimism's; the
+    # default since session 38 (the same config as "Farsighter")
     Agent("Farsighter (refit at switch)", "farsighter", {"blr.switch_restart": "refit"}),
     Agent(
         "Farsighter (zero targets, cut margin 1)",
@@ -478,7 +479,7 @@ AGENTS: tuple[Agent, ...] = (
         {"blr.switch_restart": "zero-targets", "blr.cut_delay": 3.0},
     ),
     # the same delay rule with the optimistic targets kept at the switch (no restart)
-    Agent("Farsighter (cut delay 3)", "farsighter", {"blr.cut_delay": 3.0}),
+    Agent("Farsighter (cut delay 3)", "farsighter", {"blr.cut_delay": 3.0, **_KEPT}),
     # the optimism taken up again after 10 episodes in a row unpaid since the switch
     # (blr.rearm_episodes), with the default cut and with the cut past 3 steps of delay
     Agent("Farsighter (rearm 10)", "farsighter", {"blr.rearm_episodes": 10}),
