@@ -576,7 +576,7 @@ ENTRIES = (
         "explore/refit-deepsea-driftchain",
         "explore --families driftchain deepsea --sizes 10 14 20 --agents "
         "'Farsighter (refit at switch)' --workers 2",
-        "the posterior refitted to the replay at the switch (the default since session 38), "
+        "the posterior refitted to the replay at the switch (session 38, not the default), "
         "the drifting lock and deep sea at 10, 14 and 20",
         956,
     ),
@@ -586,6 +586,14 @@ ENTRIES = (
         "'Farsighter (refit at switch)' --workers 2",
         "the same, the chain L = 10 and 30, FrozenLake 4 x 4 and stochastic deep sea N = 10",
         460,
+    ),
+    Entry(
+        "explore/refit-early",
+        "explore --families empty frozenlake deepsea --sizes 5 4 10 --agents "
+        "'Farsighter (refit at switch)' --workers 2",
+        "the same where the first reward can come before the first update (which then restarts "
+        "from the prior alone): MiniGrid Empty-5x5, FrozenLake 4 x 4, deep sea N = 10",
+        1031,
     ),
     Entry(
         "minatar",

@@ -88,22 +88,24 @@ class BLRConfig:
     the optimistic targets at the switch. Its running statistics never forget, and every target
     they hold from before the switch carried the optimism (a bonus for every step that does not
     end the episode), which calibrated targets would otherwise work off at gamma per bootstrap.
-    none: all of it (the field's default). prior: nothing, the posterior restarts from its prior
-    (statistics zeroed, sigma_eps and the prior sigma as configured, mean 0 at the prior's
-    width) and the targets' mean with it. zero-targets: the rows but not their targets (the
-    sums of y set to 0, as if every earlier target had been 0), so the mean restarts at 0 and
-    the width stays what the rows made it. refit (the general preset's, for Farsighter): from
-    the prior, the posterior refitted to the latest 50,000 rows of the replay (each weighing a
-    step's ``data_weight``) with the calibrated targets iterated to their fixed point (fitted
-    Q-iteration, at most 200 iterations), and the targets' mean with it: what the rewards
-    confirm (the found path, learned penalties) stays, the optimism goes; a paid step whose
-    episode goes on has no next state yet and comes with the minibatches after. The learned
-    features and the replay are kept in every case. Measured (docs/design.md "What the switch
-    keeps", "The drifting lock", "The posterior refitted at the switch"): on the drifting lock
-    (a wrong move one state back) the kept values rank the wrong move with the right one
-    (L = 10: 0/5 with none, 5/5 with prior or refit); a restart drops the found path too, which
-    deep sea pays for by bsuite's criterion (N = 20: prior 3/5, none 4/5, refit 4/5, and N = 10
-    4/5, 5/5, 5/5). Our extension."""
+    none: all of it (the field's default). prior (the general preset's, for Farsighter):
+    nothing, the posterior restarts from its prior (statistics zeroed, sigma_eps and the prior
+    sigma as configured, mean 0 at the prior's width) and the targets' mean with it.
+    zero-targets: the rows but not their targets (the sums of y set to 0, as if every earlier
+    target had been 0), so the mean restarts at 0 and the width stays what the rows made it.
+    refit: from the prior, the posterior refitted to the latest 50,000 rows of the replay (each
+    weighing a step's ``data_weight``) with the calibrated targets iterated to their fixed point
+    (fitted Q-iteration, at most 200 iterations), and the targets' mean with it; from the prior
+    alone where the switch comes before the first update. The learned features and the replay
+    are kept in every case. Measured (docs/design.md "What the switch keeps", "The drifting
+    lock", "The posterior refitted at the switch"): on the drifting lock (a wrong move one state
+    back) the kept values rank the wrong move with the right one (L = 10: 0/5 with none, 5/5
+    with prior or refit); a restart drops the found path too, which deep sea pays for by
+    bsuite's criterion (N = 20: prior 3/5, none 4/5, refit 4/5); refit takes the found path at
+    once, but on Taxi its fixed point overestimates (targets up to 218 where no return exceeds
+    20: the max over six actions compounded over 200 iterations) and the greedy policy repeats
+    illegal pickups (final evaluation -911 against -200 with prior), so it is not the default.
+    Our extension."""
     stay_optimism: bool = True
     """With ``target = sample`` or ``sample-greedy``: whether a target whose window ends where it
     began (s_{t+n} equal to s_t, as after an action that does not move the agent: MiniGrid's
