@@ -9,6 +9,7 @@ import numpy as np
 import pytest
 import torch
 
+from farsighter.agents.farsighter_posterior import largest_return_to_go, replay_rows
 from farsighter.ops.blr import BLRHead
 from farsighter.ops.refit import ReplayRows, bellman_targets, refit
 from farsighter.replay import VectorStep
@@ -143,6 +144,9 @@ def test_the_switch_refits_the_posterior_to_the_replay(tmp_path: Path) -> None:
     # the paid step's value, learned at once; the prior has no values at all
     q_refit, _ = refitted.q_estimate(eye)
     assert refitted.counters.updates > 0
+    # the rows it fitted carry the ceiling of their returns (the paid step's 1)
+    fitted = replay_rows(refitted.replay, refitted.cfg, 1, torch.device("cpu"), refitted.torso)
+    assert fitted.ceiling == pytest.approx(1.0)
     paid = int(refitted.replay.actions[0, 12])
     assert q_refit[3, paid] > 0.3 and q_refit[3, paid] == q_refit.max(), q_refit
 
@@ -173,3 +177,49 @@ def test_a_switch_before_any_update_restarts_from_the_prior(tmp_path: Path) -> N
         )
     assert agent.loss.calibrated and agent.counters.updates == 0
     assert float(agent.head.count_A.sum()) == 0 and not agent.head.mean_AD.any()
+
+
+def test_no_target_passes_the_largest_return_the_replay_showed(tmp_path: Path) -> None:
+    """The ceiling: the largest discounted return from any step to its episode's end (an
+    episode ended by its time limit counts to its last step), and a refit whose fixed point
+    would pass it (the diverging example) settles at it instead."""
+    agent = make_agent(tmp_path)
+    obs = np.zeros((1, 4), np.float32)
+    # episode 1: 0, 0, 1 (terminated); episode 2: 0.5 then 0.5 (truncated); a step of a third
+    for reward, term, trunc in [
+        (0, 0, 0),
+        (0, 0, 0),
+        (1, 1, 0),
+        (0.5, 0, 0),
+        (0.5, 0, 1),
+        (0, 0, 0),
+    ]:
+        agent.observe(
+            VectorStep(
+                obs,
+                np.array([0]),
+                np.array([reward], dtype=np.float32),
+                np.array([bool(term)]),
+                np.array([bool(trunc)]),
+                [obs[0]] if term or trunc else None,
+            )
+        )
+    e_N, l_N = agent.replay.recent_indices(100)
+    assert largest_return_to_go(agent.replay, e_N, l_N, 0.9) == pytest.approx(1.0)
+    assert largest_return_to_go(agent.replay, e_N, l_N, 1.0) == pytest.approx(1.0)
+    # without the terminal reward the second episode's 0.5 + 0.9 * 0.5 is the largest
+    agent.replay.rewards[0, 2] = 0.0
+    assert largest_return_to_go(agent.replay, e_N, l_N, 0.9) == pytest.approx(0.95)
+
+    rows = ReplayRows(
+        torch.tensor([[1.0], [2.0]], dtype=torch.float64),
+        torch.tensor([0, 0]),
+        torch.tensor([0.0, 1.0]),
+        torch.tensor([0.99, 0.99]),
+        torch.tensor([[2.0], [2.0]]),
+        ceiling=3.0,
+    )
+    head = BLRHead(num_actions=1, dim=1, prior_std=1.0, noise_std=1.0)
+    assert refit(head, rows, weight=1e4) < 200  # settles
+    y = bellman_targets(rows, head.mean_AD)
+    assert float(y.max()) == pytest.approx(3.0)

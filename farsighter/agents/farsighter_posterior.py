@@ -5,6 +5,7 @@ networks (``torso``) and regression targets (``targets``)."""
 
 from __future__ import annotations
 
+import math
 from collections.abc import Callable
 from dataclasses import dataclass
 
@@ -25,7 +26,7 @@ from farsighter.config import Config
 from farsighter.networks import MLPTorso, RandomFeatureTorso, Torso, make_torso
 from farsighter.ops.blr import BLRHead, action_gap_scale, greedy_predictive_variance
 from farsighter.ops.refit import ReplayRows
-from farsighter.replay import ReplayBuffer
+from farsighter.replay import TERMINATED, TRUNCATED, ReplayBuffer
 
 FEATURE_CHUNK = 4_096  # rows per forward pass when computing features for a posterior refresh
 RECENT_FEATURES = 2_048  # incremental mode: minibatch features kept for adaptive k's Q-variance
@@ -230,4 +231,23 @@ def replay_rows(
         empty = torch.zeros(0, device=device)
         return ReplayRows(empty[:, None].double(), empty.long(), empty, empty, empty[:, None])
     phi, actions, returns, bootstrap, phi_next = (torch.cat(x) for x in zip(*parts, strict=True))
-    return ReplayRows(phi, actions, returns, bootstrap, phi_next)
+    ceiling = largest_return_to_go(replay, e_N, l_N, cfg.gamma)
+    return ReplayRows(phi, actions, returns, bootstrap, phi_next, ceiling)
+
+
+def largest_return_to_go(
+    replay: ReplayBuffer, e_N: np.ndarray, l_N: np.ndarray, gamma: float
+) -> float:
+    """The largest discounted return from any of the given rows (each stream's in increasing
+    order) to its episode's end, or to the latest row where the episode goes on."""
+    best = -math.inf
+    for e in np.unique(e_N):
+        mine = l_N[e_N == e]
+        slots = mine % replay.capacity
+        rewards = replay.rewards[e, slots].astype(np.float64)
+        ends = (replay.flags[e, slots] & (TERMINATED | TRUNCATED)) != 0
+        g = 0.0
+        for i in range(len(mine) - 1, -1, -1):
+            g = rewards[i] + (0.0 if ends[i] else gamma * g)
+            best = max(best, g)
+    return best

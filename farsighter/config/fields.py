@@ -95,16 +95,17 @@ class BLRConfig:
     target had been 0), so the mean restarts at 0 and the width stays what the rows made it.
     refit: from the prior, the posterior refitted to the latest 50,000 rows of the replay (each
     weighing a step's ``data_weight``) with the calibrated targets iterated to their fixed point
-    (fitted Q-iteration, at most 200 iterations), and the targets' mean with it; from the prior
+    (fitted Q-iteration, at most 200 iterations; no target above the largest discounted return
+    the replay's episodes showed from any step), and the targets' mean with it; from the prior
     alone where the switch comes before the first update. The learned features and the replay
     are kept in every case. Measured (docs/design.md "What the switch keeps", "The drifting
     lock", "The posterior refitted at the switch"): on the drifting lock (a wrong move one state
     back) the kept values rank the wrong move with the right one (L = 10: 0/5 with none, 5/5
     with prior or refit); a restart drops the found path too, which deep sea pays for by
     bsuite's criterion (N = 20: prior 3/5, none 4/5, refit 4/5); refit takes the found path at
-    once, but on Taxi its fixed point overestimates (targets up to 218 where no return exceeds
-    20: the max over six actions compounded over 200 iterations) and the greedy policy repeats
-    illegal pickups (final evaluation -911 against -200 with prior), so it is not the default.
+    once, but on Taxi its greedy policy repeats illegal pickups (final evaluation -736, -911
+    before the ceiling, whose fixed point reached 218 where no return exceeds 20; -200 with
+    prior), so it is not the default.
     Our extension."""
     stay_optimism: bool = True
     """With ``target = sample`` or ``sample-greedy``: whether a target whose window ends where it

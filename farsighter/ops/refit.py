@@ -7,7 +7,10 @@ the rows' features phi(s) weighed as the statistics weigh a step, and their targ
 calibrated Bellman targets y = r^k + gamma^k max_a phi(s')^T w_a (the same features at s and
 s'), taken under the fit's own mean and fitted again until they settle (fitted Q-iteration,
 Ernst et al. 2005, on a ridge regression with fixed features). What the rewards confirm stays
-(the found path, the learned penalties); what the optimism added goes.
+(the found path, the learned penalties); what the optimism added goes. No target passes the
+rows' ``ceiling``, the largest discounted return their episodes showed from any step: the max
+over loosely pinned values overestimates, and the iterations compound it (Taxi: targets up to
+218 where no return exceeds 20, without it).
 
 The features do not change while it iterates, so Phi Phi^T and the Cholesky factor of the
 precision are formed once; each iteration is one product for the targets, one per action for
@@ -16,6 +19,7 @@ Phi y and a triangular solve: O(n d |A|), against O(|A| d^3) for a refresh.
 
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass
 
 import torch
@@ -39,15 +43,20 @@ class ReplayRows:
     returns_N: torch.Tensor
     bootstrap_N: torch.Tensor
     phi_next_ND: torch.Tensor
+    ceiling: float = math.inf
+    """No target above it: the largest discounted return the rows' episodes showed from any of
+    their steps (what the rewards confirm; inf: no ceiling)."""
 
     def __len__(self) -> int:
         return int(self.action_N.shape[0])
 
 
 def bellman_targets(rows: ReplayRows, mean_AD: torch.Tensor) -> torch.Tensor:
-    """y = r^k + gamma^k max_a phi(s')^T mean_a of every row (float64)."""
+    """y = r^k + gamma^k max_a phi(s')^T mean_a of every row (float64), at most the rows'
+    ``ceiling``."""
     q_NA = rows.phi_next_ND @ mean_AD.to(rows.phi_next_ND.dtype).T
-    return rows.returns_N.double() + rows.bootstrap_N.double() * q_NA.max(dim=1).values.double()
+    y_N = rows.returns_N.double() + rows.bootstrap_N.double() * q_NA.max(dim=1).values.double()
+    return y_N.clamp(max=rows.ceiling)
 
 
 @torch.no_grad()
@@ -84,6 +93,7 @@ def refit(
         rows.returns_N[order_N],
         rows.bootstrap_N[order_N],
         rows.phi_next_ND[order_N],
+        rows.ceiling,
     )
     ends = torch.bincount(a_N, minlength=head.num_actions).cumsum(0).tolist()
     spans = [slice(lo, hi) for lo, hi in zip([0, *ends[:-1]], ends, strict=True)]
