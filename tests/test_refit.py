@@ -3,6 +3,7 @@ switch (farsighter/ops/refit.py), against value iteration on a tabular chain, an
 
 from __future__ import annotations
 
+import math
 from pathlib import Path
 
 import numpy as np
@@ -84,17 +85,24 @@ def test_each_iteration_carries_a_value_back_one_window() -> None:
         assert reached == list(range(n - 1 - iterations, n)), right
 
 
-def test_a_diverging_fit_stops_within_its_bound() -> None:
-    """One feature, phi = 1 at s and 2 at s': least squares over the two rows moves the weight
-    by 6 gamma / 5 > 1 each iteration (Tsitsiklis and Van Roy's divergence). The refit stops
-    before its targets pass what no fixed point of these rows reaches, |r| / (1 - gamma)."""
-    rows = ReplayRows(
+def diverging_rows(ceiling: float = math.inf) -> ReplayRows:
+    """Tsitsiklis and Van Roy's two rows: one feature, phi = 1 at s and 2 at s' (both lead to
+    phi = 2), rewards 0 and 1."""
+    return ReplayRows(
         torch.tensor([[1.0], [2.0]], dtype=torch.float64),
         torch.tensor([0, 0]),
         torch.tensor([0.0, 1.0]),
         torch.tensor([0.99, 0.99]),
         torch.tensor([[2.0], [2.0]]),
+        ceiling,
     )
+
+
+def test_a_diverging_fit_stops_within_its_bound() -> None:
+    """One feature, phi = 1 at s and 2 at s': least squares over the two rows moves the weight
+    by 6 gamma / 5 > 1 each iteration (Tsitsiklis and Van Roy's divergence). The refit stops
+    before its targets pass what no fixed point of these rows reaches, |r| / (1 - gamma)."""
+    rows = diverging_rows()
     head = BLRHead(num_actions=1, dim=1, prior_std=1.0, noise_std=1.0)
     iterations = refit(head, rows, weight=1e4)
     assert 5 < iterations < 200
@@ -211,14 +219,7 @@ def test_no_target_passes_the_largest_return_the_replay_showed(tmp_path: Path) -
     agent.replay.rewards[0, 2] = 0.0
     assert largest_return_to_go(agent.replay, e_N, l_N, 0.9) == pytest.approx(0.95)
 
-    rows = ReplayRows(
-        torch.tensor([[1.0], [2.0]], dtype=torch.float64),
-        torch.tensor([0, 0]),
-        torch.tensor([0.0, 1.0]),
-        torch.tensor([0.99, 0.99]),
-        torch.tensor([[2.0], [2.0]]),
-        ceiling=3.0,
-    )
+    rows = diverging_rows(ceiling=3.0)
     head = BLRHead(num_actions=1, dim=1, prior_std=1.0, noise_std=1.0)
     assert refit(head, rows, weight=1e4) < 200  # settles
     y = bellman_targets(rows, head.mean_AD)
