@@ -19,7 +19,6 @@ from farsighter.agents.learner import make_target_cache
 from farsighter.config import Config
 from farsighter.exploration import ThompsonExploration
 from farsighter.exploration.optimism import calibrated, restart_at_switch, without_staying
-from farsighter.ops.refit import ReplayRows
 
 
 class SeedParts:
@@ -43,18 +42,12 @@ class SeedParts:
         self.gen.manual_seed(cfg.seed + 3)
         self.cache = make_target_cache(cfg, device, dim)  # FarsighterLoss's, keyed by its streams
 
-    def calibrate(
-        self,
-        restart: bool = True,
-        on: bool = True,
-        rows: Callable[[], ReplayRows] | None = None,
-    ) -> None:
-        """``blr.optimism = until-reward``'s switch (``FarsighterAgent.calibrate``; ``rows``:
-        the replay rows of ``blr.switch_restart = refit``)."""
+    def calibrate(self, restart: bool = True, on: bool = True) -> None:
+        """``blr.optimism = until-reward``'s switch (``FarsighterAgent.calibrate``)."""
         self.calibrated = on
         self.blr, self.k_target = calibrated(self.cfg.blr, self.cfg.k_target, on)
         if restart and on:
-            restart_at_switch(self.cfg, self.head, self.target_mean_AD, rows)
+            restart_at_switch(self.cfg, self.head, self.target_mean_AD)
 
     def draws(self, rows: int, one_step: bool) -> Tensors:
         """The targets' draws (``FarsighterAgent._draws``), from this seed's generator."""

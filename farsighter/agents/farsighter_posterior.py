@@ -6,7 +6,7 @@ networks (``torso``) and regression targets (``targets``)."""
 from __future__ import annotations
 
 import math
-from collections.abc import Callable
+from collections.abc import Callable, Iterator
 from dataclasses import dataclass
 
 import gymnasium as gym
@@ -160,6 +160,29 @@ def refresh_posterior(
     adapt_k(counters, counters.q_variance, cfg.adaptive_k, replay)
 
 
+def windows(
+    replay: ReplayBuffer,
+    e_N: np.ndarray,
+    l_N: np.ndarray,
+    cfg: Config,
+    k: int,
+    device: torch.device,
+) -> Iterator[TensorBatch]:
+    """The valid k-step windows starting at the given rows of ``replay``, ``FEATURE_CHUNK``
+    candidates at a time (stacked frames are never all in memory)."""
+    for lo in range(0, len(e_N), FEATURE_CHUNK):
+        part = replay.sample_indices(
+            e_N[lo : lo + FEATURE_CHUNK],
+            l_N[lo : lo + FEATURE_CHUNK],
+            k,
+            cfg.gamma,
+            stride=k if cfg.stride else 1,  # Algorithm 1: one tuple per k
+            on_device=True,  # from the device mirror when the replay keeps one
+        )
+        if len(part.actions) > 0:
+            yield batch_tensors(part, device)
+
+
 @torch.no_grad()
 def refresh_rows(
     replay: ReplayBuffer,
@@ -173,20 +196,9 @@ def refresh_rows(
 ) -> tuple[torch.Tensor, torch.Tensor, torch.Tensor]:
     """Features of the current theta (``torso``) and the regression targets (``targets``) of
     the valid k-step tuples starting at the given rows of ``replay``: a batch-mode posterior
-    refresh's data, gathered chunk by chunk (stacked frames are never all in memory)."""
+    refresh's data, gathered chunk by chunk (:func:`windows`)."""
     phis, actions, ys = [], [], []
-    for lo in range(0, len(e_N), FEATURE_CHUNK):
-        part = replay.sample_indices(
-            e_N[lo : lo + FEATURE_CHUNK],
-            l_N[lo : lo + FEATURE_CHUNK],
-            k,
-            cfg.gamma,
-            stride=k if cfg.stride else 1,  # Algorithm 1: one tuple per k
-            on_device=True,  # from the device mirror when the replay keeps one
-        )
-        if len(part.actions) == 0:
-            continue
-        t = batch_tensors(part, device)
+    for t in windows(replay, e_N, l_N, cfg, k, device):
         phis.append(torso(t.obs_B))
         actions.append(t.actions_B)
         ys.append(targets(t))
@@ -212,21 +224,10 @@ def replay_rows(
     torso's (which lag them) extrapolates, and its values climbed past any return (the drifting
     lock L = 10: every Q above 1, up to 3.4, for a reward of 1)."""
     e_N, l_N = replay.recent_indices(REFIT_ROWS, streams)
-    parts = []
-    for lo in range(0, len(e_N), FEATURE_CHUNK):
-        part = replay.sample_indices(
-            e_N[lo : lo + FEATURE_CHUNK],
-            l_N[lo : lo + FEATURE_CHUNK],
-            k,
-            cfg.gamma,
-            stride=k if cfg.stride else 1,
-            on_device=True,
-        )
-        if len(part.actions) == 0:
-            continue
-        t = batch_tensors(part, device)
-        phi = torso(t.obs_B).double()
-        parts.append((phi, t.actions_B, t.returns_B, t.bootstrap_B, torso(t.next_obs_B)))
+    parts = [
+        (torso(t.obs_B).double(), t.actions_B, t.returns_B, t.bootstrap_B, torso(t.next_obs_B))
+        for t in windows(replay, e_N, l_N, cfg, k, device)
+    ]
     if not parts:
         empty = torch.zeros(0, device=device)
         return ReplayRows(empty[:, None].double(), empty.long(), empty, empty, empty[:, None])

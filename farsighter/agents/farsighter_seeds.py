@@ -141,13 +141,13 @@ class SeedBatchFarsighter:
         """Seed ``s``'s switch (``FarsighterAgent.calibrate``): its targets, its streams' windows
         cut where its calibrated target is cut, and its posterior's restart."""
         p, streams = self.parts[s], self.replay.seed_streams(s)
-        cut = optimism.calibrated(self.cfg.blr, self.cfg.k_target, on)[1] == "cut"
-        self.replay.cut_E[streams] = cut  # before a refit reads the windows
-        own = partial(self.torso.member_forward, s=s)
-        args = (self.cfg, p.counters.k, self.device, own, streams)
-        p.calibrate(
-            restart, on, partial(replay_rows, self.replay, *args) if p.counters.updates else None
-        )
+        p.calibrate(restart=False, on=on)  # its targets; the windows cut before a refit reads them
+        self.replay.cut_E[streams] = p.k_target == "cut"
+        if restart and on:
+            own = partial(self.torso.member_forward, s=s)
+            args = (self.replay, self.cfg, p.counters.k, self.device, own, streams)
+            rows = partial(replay_rows, *args) if p.counters.updates else None
+            optimism.restart_at_switch(self.cfg, p.head, p.target_mean_AD, rows)
 
     # ------------------------------------------------------------------ learning
     def learn(self, global_step: int) -> list[dict[str, torch.Tensor]]:

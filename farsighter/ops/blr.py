@@ -133,6 +133,22 @@ def _check_stds(prior_std: float, noise_std: float) -> None:
         raise ValueError(f"noise_std must be a finite number > 0, got {noise_std}")
 
 
+def precision_factor(
+    phiphiT_ADD: torch.Tensor, prior_std: float, noise_std: float
+) -> tuple[torch.Tensor, torch.Tensor]:
+    """The lower Cholesky factor L of Eq. 9's precision P_a = Phi_a Phi_a^T / noise_std^2 +
+    I / prior_std^2 (jitter-repaired), and the jitter added to each action's."""
+    dim = phiphiT_ADD.shape[-1]
+    eye_DD = torch.eye(dim, dtype=phiphiT_ADD.dtype, device=phiphiT_ADD.device)
+    precision_ADD = phiphiT_ADD / noise_std**2 + eye_DD / prior_std**2  # Eq. 9, inverse of Cov_a
+    return cholesky_jitter(precision_ADD)
+
+
+def factor_mean(l_ADD: torch.Tensor, phiy_AD: torch.Tensor, noise_std: float) -> torch.Tensor:
+    """Eq. 9's mean P_a^-1 Phi_a y_a / noise_std^2 from the precision's factor L."""
+    return torch.cholesky_solve((phiy_AD / noise_std**2).unsqueeze(-1), l_ADD).squeeze(-1)
+
+
 def blr_posterior_factor(
     phiphiT_ADD: torch.Tensor,
     phiy_AD: torch.Tensor,
@@ -156,12 +172,9 @@ def blr_posterior_factor(
         (mean_AD, sqrt_cov_ADD, jitter_A), in the dtype of the statistics.
     """
     _check_stds(prior_std, noise_std)
-    dim = phiphiT_ADD.shape[-1]
-    eye_DD = torch.eye(dim, dtype=phiphiT_ADD.dtype, device=phiphiT_ADD.device)
-    precision_ADD = phiphiT_ADD / noise_std**2 + eye_DD / prior_std**2  # Eq. 9, inverse of Cov_a
-    l_ADD, jitter_A = cholesky_jitter(precision_ADD)
-    rhs_AD1 = (phiy_AD / noise_std**2).unsqueeze(-1)
-    mean_AD = torch.cholesky_solve(rhs_AD1, l_ADD).squeeze(-1)
+    l_ADD, jitter_A = precision_factor(phiphiT_ADD, prior_std, noise_std)
+    mean_AD = factor_mean(l_ADD, phiy_AD, noise_std)
+    eye_DD = torch.eye(l_ADD.shape[-1], dtype=l_ADD.dtype, device=l_ADD.device)
     # L^-1 by a triangular solve against I (cheaper and stabler than a general inverse).
     linv_ADD = torch.linalg.solve_triangular(l_ADD, eye_DD.expand_as(l_ADD), upper=False)
     sqrt_cov_ADD = linv_ADD.transpose(-1, -2)  # U = L^-T, U U^T = Cov_a

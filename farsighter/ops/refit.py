@@ -24,7 +24,7 @@ from dataclasses import dataclass
 
 import torch
 
-from farsighter.ops.blr import BLRHead, cholesky_jitter
+from farsighter.ops.blr import BLRHead, factor_mean, precision_factor
 
 REFIT_ITERATIONS = 200
 """Most iterations: each carries a value back by one window (k steps, fewer where cut)."""
@@ -101,13 +101,11 @@ def refit(
     root = weight**0.5
     head.accumulate(rows.phi_ND * root, a_N, y_N * root)
     head.count_A.mul_(count)  # (the residual scale divides the weighted sums by the count)
-    noise2, prior2 = head.noise_std**2, head.prior_std**2
-    eye_DD = torch.eye(head.dim, dtype=head.stats_dtype, device=head.device)
-    l_ADD, _ = cholesky_jitter(head.phiphiT_ADD / noise2 + eye_DD / prior2)
+    l_ADD, _ = precision_factor(head.phiphiT_ADD, head.prior_std, head.noise_std)
     bound = float(rows.returns_N.abs().max()) / max(1.0 - float(rows.bootstrap_N.max()), 1e-6)
     iterations = 0
     while iterations < max_iterations:
-        mean_AD = torch.cholesky_solve((head.phiy_AD / noise2).unsqueeze(-1), l_ADD).squeeze(-1)
+        mean_AD = factor_mean(l_ADD, head.phiy_AD, head.noise_std)
         new_N = bellman_targets(rows, mean_AD).to(head.stats_dtype)
         largest = float(new_N.abs().max())
         if not largest <= max(bound, 1.0) * 1.01:  # diverging (or NaN): keep the last fit
