@@ -53,7 +53,9 @@ def measure(run_dir: Path, caps: list[int]) -> dict[str, Any]:
         by_cap.append(
             {
                 "cap": cap,
-                "iterations": ran,
+                "iterations": ran.iterations,
+                "accepted": ran.accepted,  # (rejected: the head at its prior)
+                "largest_target_fitted": ran.largest,
                 "target_max": float(y_N.max()),
                 "target_min": float(y_N.min()),
                 "mean_q_by_action": [round(float(q), 2) for q in q_A],

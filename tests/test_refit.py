@@ -10,9 +10,11 @@ import numpy as np
 import pytest
 import torch
 
-from farsighter.agents.farsighter_posterior import largest_return_to_go, replay_rows
+import farsighter.ops.refit as refit_module
+from farsighter.agents.farsighter import FarsighterAgent
+from farsighter.agents.farsighter_posterior import largest_reward_sum, replay_rows
 from farsighter.ops.blr import BLRHead
-from farsighter.ops.refit import ReplayRows, bellman_targets, refit
+from farsighter.ops.refit import REFIT_SLACK, ReplayRows, bellman_targets, refit
 from farsighter.replay import VectorStep
 from tests.test_exploration_defaults import make_agent
 
@@ -60,8 +62,8 @@ def test_refit_reaches_the_q_values_of_value_iteration() -> None:
     n = 6
     rows, q_star = chain_rows(n)
     head = tabular_head(n)
-    iterations = refit(head, rows, weight=1e6, count=3.0)
-    assert 0 < iterations < 200
+    outcome = refit(head, rows, weight=1e6, count=3.0)
+    assert outcome.accepted and 0 < outcome.iterations < 200
     q = head.mean_AD.T.double().numpy()  # one-hot features: w_a[s] is Q(s, a)
     np.testing.assert_allclose(q, q_star, atol=2e-3)
     assert (q.argmax(axis=1) == q_star.argmax(axis=1)).all()
@@ -79,7 +81,7 @@ def test_each_iteration_carries_a_value_back_one_window() -> None:
     rows, _ = chain_rows(n)
     for iterations in (1, 3):
         head = tabular_head(n)
-        assert refit(head, rows, weight=1e6, max_iterations=iterations) == iterations
+        assert refit(head, rows, weight=1e6, max_iterations=iterations).iterations == iterations
         right = head.mean_AD[1].double().numpy()  # Q(s, right)
         reached = [s for s in range(n) if right[s] > 0.5 * GAMMA ** (n - 1 - s)]
         assert reached == list(range(n - 1 - iterations, n)), right
@@ -98,22 +100,39 @@ def diverging_rows(ceiling: float = math.inf) -> ReplayRows:
     )
 
 
-def test_a_diverging_fit_stops_within_its_bound() -> None:
+def test_a_diverging_fit_is_rejected() -> None:
     """One feature, phi = 1 at s and 2 at s': least squares over the two rows moves the weight
-    by 6 gamma / 5 > 1 each iteration (Tsitsiklis and Van Roy's divergence). The refit stops
-    before its targets pass what no fixed point of these rows reaches, |r| / (1 - gamma)."""
+    by 6 gamma / 5 > 1 each iteration (Tsitsiklis and Van Roy's divergence). Without a ceiling
+    the refit gives up once its targets pass what no fixed point of these rows reaches,
+    |r| / (1 - gamma), and leaves the head at its prior."""
     rows = diverging_rows()
     head = BLRHead(num_actions=1, dim=1, prior_std=1.0, noise_std=1.0)
-    iterations = refit(head, rows, weight=1e4)
-    assert 5 < iterations < 200
-    assert bool(torch.isfinite(head.mean_AD).all())
-    assert float(bellman_targets(rows, head.mean_AD).abs().max()) <= 101.0 * 1.2
+    outcome = refit(head, rows, weight=1e4)
+    assert not outcome.accepted and 5 < outcome.iterations < 200
+    assert 101.0 * 1.01 < outcome.largest < 101.0 * 1.5  # the first target past the bound
+    assert float(head.count_A.sum()) == 0 and not head.mean_AD.any()
 
 
-def test_the_switch_refits_the_posterior_to_the_replay(tmp_path: Path) -> None:
-    """blr.switch_restart refit: at the first positive reward the statistics are the replay's
-    rows (each counted as the statistics count a step), the targets' mean is the fit's, and the
-    paid step's value is learned at once; a restart from the prior knows nothing of it."""
+def test_an_overestimating_fit_is_rejected_and_a_sound_one_kept() -> None:
+    """The ceiling: the same diverging rows with a ceiling of 3 are rejected at the first target
+    above 3 (and its slack), long before the divergence bound; the chain, whose fixed point
+    takes its reward 1, is kept with a ceiling of 1 and rejected with one of 0.5."""
+    rows = diverging_rows(ceiling=3.0)
+    head = BLRHead(num_actions=1, dim=1, prior_std=1.0, noise_std=1.0)
+    outcome = refit(head, rows, weight=1e4)
+    assert not outcome.accepted and 3.0 + REFIT_SLACK < outcome.largest < 10.0
+    assert not head.mean_AD.any()
+    chain, _ = chain_rows(6)
+    for ceiling, accepted in ((1.0, True), (0.5, False)):
+        chain.ceiling = ceiling
+        head = tabular_head(6)
+        assert refit(head, chain, weight=1e6).accepted is accepted
+        assert bool(head.mean_AD.any()) is accepted
+
+
+def switched_agent(path: Path, mode: str) -> FarsighterAgent:
+    """An agent of ``blr.switch_restart = mode`` that updated at every step of a four-state
+    walk, then switched at the paid step (the 13th, which ends the episode)."""
     values = {
         "blr.mode": "incremental",
         "blr.optimism": "until-reward",
@@ -121,30 +140,35 @@ def test_the_switch_refits_the_posterior_to_the_replay(tmp_path: Path) -> None:
         "k": 1,
         "batch_size": 4,
         "train_every": 2,
+        "blr.switch_restart": mode,
     }
     eye = np.eye(4, dtype=np.float32)
-    agents = {
-        m: make_agent(tmp_path / m, **values, **{"blr.switch_restart": m})
-        for m in ("refit", "prior")
-    }
-    for agent in agents.values():
-        for t in range(13):  # three observations in turn, then a fourth that pays and ends it
-            obs = eye[3 if t == 12 else t % 3][None]
-            action = agent.act(obs, t)
-            end, reward = t == 12, 1.0 if t == 12 else 0.0
-            step = VectorStep(
-                obs,
-                action,
-                np.array([reward]),
-                np.array([end]),
-                np.array([False]),
-                [eye[0]] if end else None,
-            )
-            agent.observe(step)
-            if t < 12:
-                agent.learn(t)  # updates from step 0 (learning_starts 0)
-        assert agent.loss.calibrated
-    refitted, prior = agents["refit"], agents["prior"]
+    agent = make_agent(path, **values)
+    for t in range(13):  # three observations in turn, then a fourth that pays and ends it
+        obs = eye[3 if t == 12 else t % 3][None]
+        action = agent.act(obs, t)
+        end, reward = t == 12, 1.0 if t == 12 else 0.0
+        step = VectorStep(
+            obs,
+            action,
+            np.array([reward]),
+            np.array([end]),
+            np.array([False]),
+            [eye[0]] if end else None,
+        )
+        agent.observe(step)
+        if t < 12:
+            agent.learn(t)  # updates from step 0 (learning_starts 0)
+    assert agent.loss.calibrated
+    return agent
+
+
+def test_the_switch_refits_the_posterior_to_the_replay(tmp_path: Path) -> None:
+    """blr.switch_restart refit: at the first positive reward the statistics are the replay's
+    rows (each counted as the statistics count a step), the targets' mean is the fit's, and the
+    paid step's value is learned at once; a restart from the prior knows nothing of it."""
+    refitted, prior = (switched_agent(tmp_path / m, m) for m in ("refit", "prior"))
+    eye = np.eye(4, dtype=np.float32)
     rows = 13  # every step's one-step window, the paid one's ended by its terminal
     assert float(refitted.head.count_A.sum()) == pytest.approx(rows * 4 / 2)
     torch.testing.assert_close(refitted.loss.target_mean_AD, refitted.head.mean_AD)
@@ -157,6 +181,26 @@ def test_the_switch_refits_the_posterior_to_the_replay(tmp_path: Path) -> None:
     assert fitted.ceiling == pytest.approx(1.0)
     paid = int(refitted.replay.actions[0, 12])
     assert q_refit[3, paid] > 0.3 and q_refit[3, paid] == q_refit.max(), q_refit
+
+
+def test_a_rejected_refit_is_the_restart_from_the_prior(
+    tmp_path: Path, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    """A fit that fails its check leaves the agent where ``prior`` puts it, bit for bit: the
+    same posterior, the same widths, the same targets' mean and the same next draws."""
+    monkeypatch.setattr(refit_module, "fit_is_sound", lambda rows, y: False)
+    rejected, prior = (switched_agent(tmp_path / m, m) for m in ("refit", "prior"))
+    for name in ("phiphiT_ADD", "phiy_AD", "count_A", "mean_AD"):
+        torch.testing.assert_close(getattr(rejected.head, name), getattr(prior.head, name))
+    assert (rejected.head.noise_std, rejected.head.prior_std) == (
+        prior.head.noise_std,
+        prior.head.prior_std,
+    )
+    torch.testing.assert_close(rejected.loss.target_mean_AD, prior.loss.target_mean_AD)
+    obs = np.eye(4, dtype=np.float32)[:1]
+    assert [int(rejected.act(obs, 13 + t)[0]) for t in range(20)] == [
+        int(prior.act(obs, 13 + t)[0]) for t in range(20)
+    ]
 
 
 def test_a_switch_before_any_update_restarts_from_the_prior(tmp_path: Path) -> None:
@@ -187,10 +231,10 @@ def test_a_switch_before_any_update_restarts_from_the_prior(tmp_path: Path) -> N
     assert float(agent.head.count_A.sum()) == 0 and not agent.head.mean_AD.any()
 
 
-def test_no_target_passes_the_largest_return_the_replay_showed(tmp_path: Path) -> None:
-    """The ceiling: the largest discounted return from any step to its episode's end (an
-    episode ended by its time limit counts to its last step), and a refit whose fixed point
-    would pass it (the diverging example) settles at it instead."""
+def test_the_ceiling_is_the_largest_reward_sum_the_replay_showed(tmp_path: Path) -> None:
+    """The ceiling: the largest discounted sum of rewards from any step to any later step of its
+    episode (an episode ended by its time limit counts to its last step; a cost after a reward
+    does not lower it)."""
     agent = make_agent(tmp_path)
     obs = np.zeros((1, 4), np.float32)
     # episode 1: 0, 0, 1 (terminated); episode 2: 0.5 then 0.5 (truncated); a step of a third
@@ -213,14 +257,11 @@ def test_no_target_passes_the_largest_return_the_replay_showed(tmp_path: Path) -
             )
         )
     e_N, l_N = agent.replay.recent_indices(100)
-    assert largest_return_to_go(agent.replay, e_N, l_N, 0.9) == pytest.approx(1.0)
-    assert largest_return_to_go(agent.replay, e_N, l_N, 1.0) == pytest.approx(1.0)
+    assert largest_reward_sum(agent.replay, e_N, l_N, 0.9) == pytest.approx(1.0)
+    assert largest_reward_sum(agent.replay, e_N, l_N, 1.0) == pytest.approx(1.0)
     # without the terminal reward the second episode's 0.5 + 0.9 * 0.5 is the largest
     agent.replay.rewards[0, 2] = 0.0
-    assert largest_return_to_go(agent.replay, e_N, l_N, 0.9) == pytest.approx(0.95)
-
-    rows = diverging_rows(ceiling=3.0)
-    head = BLRHead(num_actions=1, dim=1, prior_std=1.0, noise_std=1.0)
-    assert refit(head, rows, weight=1e4) < 200  # settles
-    y = bellman_targets(rows, head.mean_AD)
-    assert float(y.max()) == pytest.approx(3.0)
+    assert largest_reward_sum(agent.replay, e_N, l_N, 0.9) == pytest.approx(0.95)
+    # a cost after the rewards (its return to the end 0.5 - 0.9 * 0.5 * 0.9 ...) leaves it
+    agent.replay.rewards[0, 4] = -5.0
+    assert largest_reward_sum(agent.replay, e_N, l_N, 0.9) == pytest.approx(0.5)

@@ -232,23 +232,24 @@ def replay_rows(
         empty = torch.zeros(0, device=device)
         return ReplayRows(empty[:, None].double(), empty.long(), empty, empty, empty[:, None])
     phi, actions, returns, bootstrap, phi_next = (torch.cat(x) for x in zip(*parts, strict=True))
-    ceiling = largest_return_to_go(replay, e_N, l_N, cfg.gamma)
+    ceiling = largest_reward_sum(replay, e_N, l_N, cfg.gamma)
     return ReplayRows(phi, actions, returns, bootstrap, phi_next, ceiling)
 
 
-def largest_return_to_go(
+def largest_reward_sum(
     replay: ReplayBuffer, e_N: np.ndarray, l_N: np.ndarray, gamma: float
 ) -> float:
-    """The largest discounted return from any of the given rows (each stream's in increasing
-    order) to its episode's end, or to the latest row where the episode goes on."""
+    """The largest discounted sum of rewards from any of the given rows (each stream's in
+    increasing order) to any later row of its episode (at most to its end, or to the latest row
+    where the episode goes on): what the rewards confirm, and at least every k-step return."""
     best = -math.inf
     for e in np.unique(e_N):
         mine = l_N[e_N == e]
         slots = mine % replay.capacity
         rewards = replay.rewards[e, slots].astype(np.float64)
         ends = (replay.flags[e, slots] & (TERMINATED | TRUNCATED)) != 0
-        g = 0.0
+        g = 0.0  # the largest sum from row i on: its reward and, where it pays, the best after
         for i in range(len(mine) - 1, -1, -1):
-            g = rewards[i] + (0.0 if ends[i] else gamma * g)
+            g = rewards[i] + (0.0 if ends[i] else gamma * max(g, 0.0))
             best = max(best, g)
     return best

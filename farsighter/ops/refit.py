@@ -7,10 +7,14 @@ the rows' features phi(s) weighed as the statistics weigh a step, and their targ
 calibrated Bellman targets y = r^k + gamma^k max_a phi(s')^T w_a (the same features at s and
 s'), taken under the fit's own mean and fitted again until they settle (fitted Q-iteration,
 Ernst et al. 2005, on a ridge regression with fixed features). What the rewards confirm stays
-(the found path, the learned penalties); what the optimism added goes. No target passes the
-rows' ``ceiling``, the largest discounted return their episodes showed from any step: the max
-over loosely pinned values overestimates, and the iterations compound it (Taxi: targets up to
-218 where no return exceeds 20, without it).
+(the found path, the learned penalties); what the optimism added goes.
+
+A fit that overestimates is not kept: where a target passes the rows' ``ceiling`` (the largest
+discounted reward sum their episodes showed from any step to any later one) by more than
+:data:`REFIT_SLACK`, the refit gives up and leaves the posterior at its prior, the restart it
+replaces. The max over loosely pinned values overestimates, and the iterations compound it
+(Taxi-v4: targets up to 218 where no return exceeds 20); on deep sea and the drifting lock the
+fixed point stays at the ceiling (the paid step's own reward).
 
 The features do not change while it iterates, so Phi Phi^T and the Cholesky factor of the
 precision are formed once; each iteration is one product for the targets, one per action for
@@ -32,6 +36,9 @@ REFIT_ITERATIONS = 200
 REFIT_TOLERANCE = 1e-4
 """Iterations stop when no target moved by more than this times max(1, the largest |target|)."""
 
+REFIT_SLACK = 0.01
+"""A target above the ceiling by more than this times max(1, |ceiling|) rejects the fit."""
+
 
 @dataclass
 class ReplayRows:
@@ -44,19 +51,39 @@ class ReplayRows:
     bootstrap_N: torch.Tensor
     phi_next_ND: torch.Tensor
     ceiling: float = math.inf
-    """No target above it: the largest discounted return the rows' episodes showed from any of
-    their steps (what the rewards confirm; inf: no ceiling)."""
+    """The largest discounted reward sum the rows' episodes showed from any of their steps to
+    any later one (what the rewards confirm): a fit with a target above it is rejected (inf:
+    none, and the fit is rejected only where it diverges)."""
 
     def __len__(self) -> int:
         return int(self.action_N.shape[0])
 
 
+@dataclass(frozen=True)
+class RefitOutcome:
+    """What :func:`refit` did."""
+
+    iterations: int
+    """Fitted Q-iterations made."""
+    accepted: bool
+    """Whether the posterior holds the fit (else it was left at its prior)."""
+    largest: float
+    """The largest target of the last iteration made (of the one that rejected the fit)."""
+
+
 def bellman_targets(rows: ReplayRows, mean_AD: torch.Tensor) -> torch.Tensor:
-    """y = r^k + gamma^k max_a phi(s')^T mean_a of every row (float64), at most the rows'
-    ``ceiling``."""
+    """y = r^k + gamma^k max_a phi(s')^T mean_a of every row (float64)."""
     q_NA = rows.phi_next_ND @ mean_AD.to(rows.phi_next_ND.dtype).T
-    y_N = rows.returns_N.double() + rows.bootstrap_N.double() * q_NA.max(dim=1).values.double()
-    return y_N.clamp(max=rows.ceiling)
+    return rows.returns_N.double() + rows.bootstrap_N.double() * q_NA.max(dim=1).values.double()
+
+
+def fit_is_sound(rows: ReplayRows, y_N: torch.Tensor) -> bool:
+    """Whether a fit's targets ``y_N`` may be kept: none above the rows' ``ceiling`` by more
+    than :data:`REFIT_SLACK` (an overestimating fit), none beyond what no fixed point of the
+    rows reaches, their largest |return| over 1 - gamma^k's smallest (a diverging one), no NaN."""
+    bound = float(rows.returns_N.abs().max()) / max(1.0 - float(rows.bootstrap_N.max()), 1e-6)
+    ceiling = rows.ceiling + REFIT_SLACK * max(1.0, abs(rows.ceiling))
+    return float(y_N.max()) <= ceiling and float(y_N.abs().max()) <= max(bound, 1.0) * 1.01
 
 
 @torch.no_grad()
@@ -67,23 +94,23 @@ def refit(
     count: float = 1.0,
     max_iterations: int = REFIT_ITERATIONS,
     tol: float = REFIT_TOLERANCE,
-) -> int:
+) -> RefitOutcome:
     """Replace the head's statistics by the rows' (each weighing ``weight`` and counting
     ``count`` rows, as the statistics count a step) with targets fitted by fitted Q-iteration
-    from the head's current mean, then refresh; returns the iterations.
+    from the head's current mean, then refresh.
 
     Each iteration takes the targets under the latest mean and solves for the next mean, which
     is the mean :meth:`BLRHead.refresh` gives from the same statistics (the precision's factor is
-    formed once). It stops when the targets settle, after ``max_iterations``, or when a target
-    grows past the rows' largest |return| over 1 - gamma^k's smallest (what no fixed point of
-    these rows reaches: a fit that diverges), keeping the last iteration within that bound.
+    formed once). It stops when the targets settle or after ``max_iterations``. Where a target
+    fails :func:`fit_is_sound` (an overestimating or diverging fit) the head is restarted
+    instead (:meth:`BLRHead.restart`): the fit is not kept, and the head is at its prior.
     """
     if weight <= 0:
         raise ValueError(f"weight must be > 0, got {weight}")
     head.reset_statistics()
     if len(rows) == 0:
         head.refresh()
-        return 0
+        return RefitOutcome(0, True, -math.inf)
     a_N = rows.action_N.to(head.device, torch.long)
     order_N = torch.argsort(a_N, stable=True)  # each action's rows in one slice, in their order
     a_N = a_N[order_N]
@@ -102,21 +129,20 @@ def refit(
     head.accumulate(rows.phi_ND * root, a_N, y_N * root)
     head.count_A.mul_(count)  # (the residual scale divides the weighted sums by the count)
     l_ADD, _ = precision_factor(head.phiphiT_ADD, head.prior_std, head.noise_std)
-    bound = float(rows.returns_N.abs().max()) / max(1.0 - float(rows.bootstrap_N.max()), 1e-6)
-    iterations = 0
+    iterations, largest = 0, float(y_N.max())
     while iterations < max_iterations:
         mean_AD = factor_mean(l_ADD, head.phiy_AD, head.noise_std)
         new_N = bellman_targets(rows, mean_AD).to(head.stats_dtype)
-        largest = float(new_N.abs().max())
-        if not largest <= max(bound, 1.0) * 1.01:  # diverging (or NaN): keep the last fit
-            break
-        iterations += 1
+        iterations, largest = iterations + 1, float(new_N.max())
+        if not fit_is_sound(rows, new_N):
+            head.restart()
+            return RefitOutcome(iterations, False, largest)
         moved = float((new_N - y_N).abs().max())
         y_N = new_N
         for a, span in enumerate(spans):  # Phi_a y_a and y_a^T y_a of the new targets
             head.phiy_AD[a] = (rows.phi_ND[span].T @ y_N[span]) * weight
             head.yy_A[a] = y_N[span].square().sum() * weight
-        if moved <= tol * max(1.0, largest):
+        if moved <= tol * max(1.0, float(y_N.abs().max())):
             break
     head.refresh()
-    return iterations
+    return RefitOutcome(iterations, True, largest)
