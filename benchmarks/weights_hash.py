@@ -111,6 +111,9 @@ RUNS: dict[str, tuple[str, str, int, dict[str, Any]]] = {
     # the defaults past their first positive reward (the chain L = 8 pays within the run): the
     # switch to the posterior mean's target cut before exploratory actions (blr.optimism)
     "farsighter-general-chain": ("farsighter", "farsighter/Chain8-v0", 3_000, GENERAL),
+    # ... and past a first positive reward after its first update (the chain L = 10 pays at step
+    # 1,208, learning_starts 1,000): the posterior refitted to the replay (blr.switch_restart)
+    "farsighter-general-chain10": ("farsighter", "farsighter/Chain10-v0", 3_000, GENERAL),
 }
 
 
@@ -194,11 +197,17 @@ def main() -> None:
         same = {n: before[n]["sha256"] == r["sha256"] for n, r in runs.items() if n in before}
         figures["compared_with"] = args.compare
         figures["identical"] = same
+        figures["new_runs"] = [n for n in runs if n not in before]  # nothing to compare with
         figures["all_identical"] = all(same.values()) and len(same) == len(runs)
     write_result(args.name, figures)
     if args.compare and not figures["all_identical"]:
+        differ = [n for n, s in same.items() if not s]
         raise SystemExit(
-            "trained weights differ: " + ", ".join(n for n, s in same.items() if not s)
+            (f"trained weights differ: {', '.join(differ)}" if differ else "no weights differ")
+            + (
+                f"; not in {args.compare}: {', '.join(figures['new_runs'])}"
+                * bool(figures["new_runs"])
+            )
         )
 
 

@@ -596,6 +596,23 @@ ENTRIES = (
         1031,
     ),
     Entry(
+        "explore/guard-deepsea-driftchain",
+        "explore --families driftchain deepsea --sizes 10 14 20 --agents "
+        "'Farsighter (refit at switch)' --workers 2",
+        "the refit with its check (a fit whose targets pass the largest reward sum the replay "
+        "showed is dropped; session 39, the default since): the drifting lock and deep sea at "
+        "10, 14 and 20",
+        974,
+    ),
+    Entry(
+        "explore/guard-tasks",
+        "explore --families chain frozenlake deepsea-stochastic empty --sizes 30 4 10 5 "
+        "--agents 'Farsighter (refit at switch)' --workers 2",
+        "the same, the chain L = 5, 10 and 30, FrozenLake 4 x 4, stochastic deep sea N = 10 and "
+        "MiniGrid Empty-5x5",
+        854,
+    ),
+    Entry(
         "minatar",
         "atari --games minatar --agents DDQN BDQN Farsighter --seeds 1 2 --steps 50000 "
         "--eval-every 10000 --eval-episodes 10",

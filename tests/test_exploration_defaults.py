@@ -633,8 +633,8 @@ def test_auto_gives_discrete_tasks_the_general_preset_and_keeps_table_1_selectab
     assert (bdqn.blr.optimism, bdqn.k_target) == ("always", "k")  # the baseline as it was
     # acting draws widened to the action gaps, Farsighter's alone
     assert (defaults.blr.act_width, bdqn.blr.act_width) == ("action-gap", "posterior")
-    # ... and the posterior restarted from its prior at the switch, Farsighter's alone
-    assert (defaults.blr.switch_restart, bdqn.blr.switch_restart) == ("prior", "none")
+    # ... and the posterior refitted to the replay at the switch, Farsighter's alone
+    assert (defaults.blr.switch_restart, bdqn.blr.switch_restart) == ("refit", "none")
     control = make_config("farsighter", "CartPole-v1", preset="control")
     assert (control.blr.switch_restart, control.blr.optimism) == ("none", "always")
     assert make_config("farsighter", "CartPole-v1", preset="control").blr.act_width == "posterior"

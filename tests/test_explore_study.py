@@ -284,7 +284,7 @@ def test_agents_are_one_config_each_on_the_auto_preset(tmp_path: Path) -> None:
             "Farsighter (redraw k)",
             "Farsighter (random features)",
             "Farsighter (data weight 100)",
-            "Farsighter (switch restart)",
+            "Farsighter (refit at switch)",
         )
     ]
     assert len({repr(dataclasses.replace(c, run_dir="")) for c in every}) == len(every)
@@ -311,8 +311,15 @@ def test_agents_are_one_config_each_on_the_auto_preset(tmp_path: Path) -> None:
     assert dataclasses.replace(switch, run_dir="") == dataclasses.replace(
         default, run_dir="", blr=kept
     )
+    # the defaults of sessions 37 and 38: the posterior restarted from the prior alone; since
+    # session 39 refitted
     restart = run_config(by["Farsighter (switch restart)"], QUICK, 3, tmp_path, (chain_id(10), 1))
-    assert dataclasses.replace(restart, run_dir="") == dataclasses.replace(default, run_dir="")
+    prior = dataclasses.replace(default.blr, switch_restart="prior")
+    assert dataclasses.replace(restart, run_dir="") == dataclasses.replace(
+        default, run_dir="", blr=prior
+    )
+    refitted = run_config(by["Farsighter (refit at switch)"], QUICK, 3, tmp_path, (chain_id(10), 1))
+    assert dataclasses.replace(refitted, run_dir="") == dataclasses.replace(default, run_dir="")
     # the variants of the targets keep them for the whole run, as when their studies were made
     for label in ("Farsighter (mean, k-step target)", "Farsighter (cut)"):
         assert run_config(by[label], QUICK, 3, tmp_path, (chain_id(10), 1)).blr.optimism == "always"

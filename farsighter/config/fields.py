@@ -88,24 +88,25 @@ class BLRConfig:
     the optimistic targets at the switch. Its running statistics never forget, and every target
     they hold from before the switch carried the optimism (a bonus for every step that does not
     end the episode), which calibrated targets would otherwise work off at gamma per bootstrap.
-    none: all of it (the field's default). prior (the general preset's, for Farsighter):
-    nothing, the posterior restarts from its prior (statistics zeroed, sigma_eps and the prior
-    sigma as configured, mean 0 at the prior's width) and the targets' mean with it.
-    zero-targets: the rows but not their targets (the sums of y set to 0, as if every earlier
-    target had been 0), so the mean restarts at 0 and the width stays what the rows made it.
-    refit: from the prior, the posterior refitted to the latest 50,000 rows of the replay (each
-    weighing a step's ``data_weight``) with the calibrated targets iterated to their fixed point
-    (fitted Q-iteration, at most 200 iterations; no target above the largest discounted return
-    the replay's episodes showed from any step), and the targets' mean with it; from the prior
-    alone where the switch comes before the first update. The learned features and the replay
-    are kept in every case. Measured (docs/design.md "What the switch keeps", "The drifting
-    lock", "The posterior refitted at the switch"): on the drifting lock (a wrong move one state
-    back) the kept values rank the wrong move with the right one (L = 10: 0/5 with none, 5/5
-    with prior or refit); a restart drops the found path too, which deep sea pays for by
-    bsuite's criterion (N = 20: prior 3/5, none 4/5, refit 4/5); refit takes the found path at
-    once, but on Taxi its greedy policy repeats illegal pickups (final evaluation -736, -911
-    before the ceiling, whose fixed point reached 218 where no return exceeds 20; -200 with
-    prior), so it is not the default.
+    none: all of it (the field's default). prior: nothing, the posterior restarts from its
+    prior (statistics zeroed, sigma_eps and the prior sigma as configured, mean 0 at the
+    prior's width) and the targets' mean with it. zero-targets: the rows but not their targets
+    (the sums of y set to 0, as if every earlier target had been 0), so the mean restarts at 0
+    and the width stays what the rows made it. refit (the general preset's, for Farsighter):
+    from the prior, the posterior refitted to the latest 50,000 rows of the replay (each
+    weighing a step's ``data_weight``) with the calibrated targets iterated to their fixed
+    point (fitted Q-iteration, at most 200 iterations), and the targets' mean with it; the fit
+    is not kept, and the restart from the prior stands, where a target passes the largest
+    discounted reward sum the replay's episodes showed from a step to a later one (an
+    overestimating fit) or where the switch comes before the first update. The learned
+    features and the replay are kept in every case. Measured (docs/design.md "What the switch
+    keeps", "The drifting lock", "The posterior refitted at the switch"): on the drifting lock
+    (a wrong move one state back) the kept values rank the wrong move with the right one
+    (L = 10: 0/5 with none, 5/5 with prior or refit); the prior alone drops the found path too,
+    which deep sea pays for by bsuite's criterion (N = 20: prior 3/5, none 4/5, refit 4/5);
+    refit takes the found path at once; on Taxi its fit overestimates (targets up to 46.7
+    where no reward sum exceeds 20) and is dropped, as the unchecked fit's greedy policy
+    repeated illegal pickups (final evaluation -736 to -911 against -200).
     Our extension."""
     stay_optimism: bool = True
     """With ``target = sample`` or ``sample-greedy``: whether a target whose window ends where it

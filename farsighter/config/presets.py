@@ -149,13 +149,19 @@ _FRESH_PER_ALGO: dict[str, dict[str, Any]] = {
 #   stay within the prior's width the run is the same, bit for bit (CartPole, Acrobot,
 #   FrozenLake, the 30-state chain, deep sea N = 20 and stochastic N = 10 measured)
 #   (docs/design.md "Draws as wide as the action gaps").
-# - At that switch the posterior restarts from its prior (blr.switch_restart prior): every
-#   target it had summed carried the optimism, which the calibrated targets work off at gamma
-#   per bootstrap, and where a wrong move revisits a state (the drifting lock, a wrong move one
-#   state back) the kept values rank the wrong move with the right one. The drifting lock
-#   L = 10: 5/5 solved and held within 2^L + 100 episodes (0/5 keeping them; DDQN 0/5); L = 14
-#   3/3 (2/3 later; DDQN 0/3). Deep sea N = 20: greedy 4/5 held 4/5 either way, bsuite's
-#   criterion 3/5 (4/5 keeping them) (docs/design.md "The drifting lock").
+# - At that switch the posterior restarts from its prior and is refitted to the replay
+#   (blr.switch_restart refit): every target it had summed carried the optimism, which the
+#   calibrated targets would work off at gamma per bootstrap, and where a wrong move revisits a
+#   state (the drifting lock, a wrong move one state back) the kept values rank the wrong move
+#   with the right one; restarted from the prior alone (session 37) it also drops the found
+#   path and explores afresh until the minibatches bring the reward back. The refit (fitted
+#   Q-iteration over the latest 50,000 rows, the calibrated targets) keeps what the rewards
+#   confirm, and is not kept where a target passes the largest reward sum the replay showed
+#   (Taxi: targets up to 46.7 against 20; the prior restart then). The drifting lock L = 10, 14,
+#   20: 5/5 each (kept: 0/5 at L = 10; DDQN 0/5); deep sea by bsuite's criterion N = 10, 14,
+#   20: 5/5, 5/5, 4/5 (the prior alone 4/5, 5/5, 3/5; kept 5/5, 4/5, 4/5); the chain L = 30,
+#   FrozenLake 4x4 and MiniGrid Empty-5x5 held 5/5 (docs/design.md "The drifting lock", "The
+#   posterior refitted at the switch"; docs/results/explore/guard-*).
 _GENERAL_PER_ALGO: dict[str, dict[str, Any]] = {
     **_FRESH_PER_ALGO,
     "farsighter": {
@@ -168,7 +174,7 @@ _GENERAL_PER_ALGO: dict[str, dict[str, Any]] = {
         "blr.optimism": "until-reward",
         "blr.calibrated_k_target": "cut",
         "blr.act_width": "action-gap",
-        "blr.switch_restart": "prior",
+        "blr.switch_restart": "refit",
     },
 }
 # The cartpole preset's learning checks (tests/test_learning_slow.py) were measured with a draw
@@ -198,8 +204,8 @@ PRESETS: dict[str, Preset] = {
             "its share in the statistics, with a draw held for the k steps of its target and "
             "widened to the action gaps the values learned, and "
             "optimistic targets until the run's first positive reward (then the posterior "
-            "restarted from its prior and its mean's k-step target, cut before the first "
-            "exploratory action), so "
+            "refitted to the replay from its prior, and its mean's k-step target, cut before "
+            "the first exploratory action), so "
             "that Thompson exploration works on tasks "
             "nobody tuned it for (docs/results/explore). Reproduce "
             "the paper with --preset control or atari.",

@@ -449,8 +449,8 @@ AGENTS: tuple[Agent, ...] = (
     Agent("Farsighter (cut margin 1)", "farsighter", {"blr.cut_margin": 1.0, **_KEPT}),
     # the posterior restarted from its prior at the switch (blr.switch_restart prior): its mean
     # fit to the calibrated targets alone, its width the prior's again where the run has not been
-    # since; or its targets zeroed (zero-targets): the mean from 0, the width kept. The first is
-    # the default since session 37 (the same config as "Farsighter")
+    # since; or its targets zeroed (zero-targets): the mean from 0, the width kept. The first was
+    # the default in sessions 37 and 38
     Agent("Farsighter (switch restart)", "farsighter", {"blr.switch_restart": "prior"}),
     Agent(
         "Farsighter (switch restart, k-step)",
@@ -464,8 +464,10 @@ AGENTS: tuple[Agent, ...] = (
     ),
     Agent("Farsighter (zero targets)", "farsighter", {"blr.switch_restart": "zero-targets"}),
     # or refitted to the replay by fitted Q-iteration (blr.switch_restart refit): the values the
-    # rewards confirm (the found path, the learned penalties) without the optimism's (session
-    # 38; not the default: docs/design.md "The posterior refitted at the switch")
+    # rewards confirm (the found path, the learned penalties) without the optimism's, a fit that
+    # passes the largest reward sum the replay showed dropped (session 38; the default since
+    # session 39, the same config as "Farsighter": docs/design.md "The posterior refitted at
+    # the switch")
     Agent("Farsighter (refit at switch)", "farsighter", {"blr.switch_restart": "refit"}),
     Agent(
         "Farsighter (zero targets, cut margin 1)",
