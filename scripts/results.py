@@ -613,6 +613,14 @@ ENTRIES = (
         854,
     ),
     Entry(
+        "explore/deepsea-growth-s39",
+        "explore --families deepsea --agents Farsighter --workers 2",
+        "deep sea at every size, N = 6 to 30, with the defaults of session 39 (the posterior "
+        "refitted at the switch), 5 seeds: the growth of the episodes to solve (issue #25 "
+        "item 4)",
+        3065,
+    ),
+    Entry(
         "minatar",
         "atari --games minatar --agents DDQN BDQN Farsighter --seeds 1 2 --steps 50000 "
         "--eval-every 10000 --eval-episodes 10",
