@@ -202,13 +202,10 @@ def main() -> None:
     write_result(args.name, figures)
     if args.compare and not figures["all_identical"]:
         differ = [n for n, s in same.items() if not s]
-        raise SystemExit(
-            (f"trained weights differ: {', '.join(differ)}" if differ else "no weights differ")
-            + (
-                f"; not in {args.compare}: {', '.join(figures['new_runs'])}"
-                * bool(figures["new_runs"])
-            )
-        )
+        said = [f"trained weights differ: {', '.join(differ)}" if differ else "no weights differ"]
+        if figures["new_runs"]:
+            said.append(f"not in {args.compare}: {', '.join(figures['new_runs'])}")
+        raise SystemExit("; ".join(said))
 
 
 if __name__ == "__main__":

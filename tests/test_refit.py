@@ -188,7 +188,7 @@ def test_a_rejected_refit_is_the_restart_from_the_prior(
 ) -> None:
     """A fit that fails its check leaves the agent where ``prior`` puts it, bit for bit: the
     same posterior, the same widths, the same targets' mean and the same next draws."""
-    monkeypatch.setattr(refit_module, "fit_is_sound", lambda rows, y: False)
+    monkeypatch.setattr(refit_module, "fit_is_sound", lambda y, limits: False)
     rejected, prior = (switched_agent(tmp_path / m, m) for m in ("refit", "prior"))
     for name in ("phiphiT_ADD", "phiy_AD", "count_A", "mean_AD"):
         torch.testing.assert_close(getattr(rejected.head, name), getattr(prior.head, name))

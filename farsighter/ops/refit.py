@@ -77,13 +77,21 @@ def bellman_targets(rows: ReplayRows, mean_AD: torch.Tensor) -> torch.Tensor:
     return rows.returns_N.double() + rows.bootstrap_N.double() * q_NA.max(dim=1).values.double()
 
 
-def fit_is_sound(rows: ReplayRows, y_N: torch.Tensor) -> bool:
-    """Whether a fit's targets ``y_N`` may be kept: none above the rows' ``ceiling`` by more
-    than :data:`REFIT_SLACK` (an overestimating fit), none beyond what no fixed point of the
-    rows reaches, their largest |return| over 1 - gamma^k's smallest (a diverging one), no NaN."""
-    bound = float(rows.returns_N.abs().max()) / max(1.0 - float(rows.bootstrap_N.max()), 1e-6)
+def fit_limits(rows: ReplayRows) -> tuple[float, float]:
+    """What a fit's targets may reach (:func:`fit_is_sound`): the rows' ``ceiling`` and its
+    :data:`REFIT_SLACK` (above it the fit overestimates), and in magnitude what no fixed point
+    of the rows reaches, their largest |return| over 1 - gamma^k's smallest (beyond it the fit
+    diverges)."""
     ceiling = rows.ceiling + REFIT_SLACK * max(1.0, abs(rows.ceiling))
-    return float(y_N.max()) <= ceiling and float(y_N.abs().max()) <= max(bound, 1.0) * 1.01
+    bound = float(rows.returns_N.abs().max()) / max(1.0 - float(rows.bootstrap_N.max()), 1e-6)
+    return ceiling, max(bound, 1.0) * 1.01
+
+
+def fit_is_sound(y_N: torch.Tensor, limits: tuple[float, float]) -> bool:
+    """Whether a fit's targets ``y_N`` may be kept: none above the first of :func:`fit_limits`,
+    none beyond the second in magnitude, no NaN."""
+    ceiling, bound = limits
+    return float(y_N.max()) <= ceiling and float(y_N.abs().max()) <= bound
 
 
 @torch.no_grad()
@@ -129,12 +137,13 @@ def refit(
     head.accumulate(rows.phi_ND * root, a_N, y_N * root)
     head.count_A.mul_(count)  # (the residual scale divides the weighted sums by the count)
     l_ADD, _ = precision_factor(head.phiphiT_ADD, head.prior_std, head.noise_std)
+    limits = fit_limits(rows)
     iterations, largest = 0, float(y_N.max())
     while iterations < max_iterations:
         mean_AD = factor_mean(l_ADD, head.phiy_AD, head.noise_std)
         new_N = bellman_targets(rows, mean_AD).to(head.stats_dtype)
         iterations, largest = iterations + 1, float(new_N.max())
-        if not fit_is_sound(rows, new_N):
+        if not fit_is_sound(new_N, limits):
             head.restart()
             return RefitOutcome(iterations, False, largest)
         moved = float((new_N - y_N).abs().max())
