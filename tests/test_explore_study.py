@@ -231,6 +231,7 @@ def test_agents_are_one_config_each_on_the_auto_preset(tmp_path: Path) -> None:
         "Farsighter (no optimism in place)",
         "Farsighter (no optimism in place, redraw revisit)",
         "Farsighter (no optimism in place, zero targets, cut delay 3)",
+        "Farsighter (no optimism in place, refit or zero targets, cut delay 3)",
         "Farsighter (posterior width)",
     ]
     by = {a.label: a for a in AGENTS}
@@ -271,11 +272,12 @@ def test_agents_are_one_config_each_on_the_auto_preset(tmp_path: Path) -> None:
         "Farsighter (no optimism in place)",
         "Farsighter (no optimism in place, redraw revisit)",
         "Farsighter (no optimism in place, zero targets, cut delay 3)",
+        "Farsighter (no optimism in place, refit or zero targets, cut delay 3)",
         "Farsighter (posterior width)",
     }
     assert not named_only & set(StudyConfig().agents)
     assert "Farsighter (redraw step)" in StudyConfig().agents
-    assert len(StudyConfig().agents) == len(AGENTS) - 36
+    assert len(StudyConfig().agents) == len(AGENTS) - 37
     every = [
         run_config(a, QUICK, 3, tmp_path, (chain_id(10), 10_000))
         for a in AGENTS

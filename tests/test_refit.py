@@ -203,6 +203,35 @@ def test_a_rejected_refit_is_the_restart_from_the_prior(
     ]
 
 
+def same_posterior(a: FarsighterAgent, b: FarsighterAgent) -> None:
+    """The same statistics, widths, targets' mean and next 20 draws."""
+    for name in ("phiphiT_ADD", "phiy_AD", "count_A", "mean_AD"):
+        torch.testing.assert_close(getattr(a.head, name), getattr(b.head, name), rtol=0, atol=0)
+    assert (a.head.noise_std, a.head.prior_std) == (b.head.noise_std, b.head.prior_std)
+    torch.testing.assert_close(a.loss.target_mean_AD, b.loss.target_mean_AD, rtol=0, atol=0)
+    obs = np.eye(4, dtype=np.float32)[:1]
+    assert [int(a.act(obs, 13 + t)[0]) for t in range(20)] == [
+        int(b.act(obs, 13 + t)[0]) for t in range(20)
+    ]
+
+
+def test_refit_zero_keeps_a_sound_fit_and_zeroes_the_targets_of_a_rejected_one(
+    tmp_path: Path, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    """blr.switch_restart refit-zero: where the fit passes its check the agent is refit's, bit
+    for bit; where it fails, zero-targets' (the rows kept, their targets 0), not the prior's."""
+    kept, refitted = (switched_agent(tmp_path / "a" / m, m) for m in ("refit-zero", "refit"))
+    same_posterior(kept, refitted)
+    assert float(kept.head.phiy_AD.abs().sum()) > 0  # the fit's targets (the paid step's)
+    monkeypatch.setattr(refit_module, "fit_is_sound", lambda y, limits: False)
+    rejected, zeroed, prior = (
+        switched_agent(tmp_path / "b" / m, m) for m in ("refit-zero", "zero-targets", "prior")
+    )
+    same_posterior(rejected, zeroed)
+    assert float(rejected.head.phiy_AD.abs().sum()) == 0
+    assert float(rejected.head.count_A.sum()) > float(prior.head.count_A.sum()) == 0
+
+
 def test_a_switch_before_any_update_restarts_from_the_prior(tmp_path: Path) -> None:
     """Before the first update the features are the initial network's: the refit falls back to
     the prior (statistics zeroed, mean 0)."""

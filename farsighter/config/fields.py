@@ -83,7 +83,7 @@ class BLRConfig:
     5/5, held 1/5, docs/results/explore/until-reward). cut: the return stopped before the first
     exploratory action (``Config.k_target = cut``; the run records which actions were from its
     start). Our extension."""
-    switch_restart: Literal["none", "prior", "zero-targets", "refit"] = "none"
+    switch_restart: Literal["none", "prior", "zero-targets", "refit", "refit-zero"] = "none"
     """With ``optimism = until-reward`` and ``mode = incremental``: what the posterior keeps of
     the optimistic targets at the switch. Its running statistics never forget, and every target
     they hold from before the switch carried the optimism (a bonus for every step that does not
@@ -106,8 +106,9 @@ class BLRConfig:
     which deep sea pays for by bsuite's criterion (N = 20: prior 3/5, none 4/5, refit 4/5);
     refit takes the found path at once; on Taxi its fit overestimates (targets up to 46.7
     where no reward sum exceeds 20) and is dropped, as the unchecked fit's greedy policy
-    repeated illegal pickups (final evaluation -736 to -911 against -200).
-    Our extension."""
+    repeated illegal pickups (final evaluation -736 to -911 against -200). refit-zero: refit,
+    but where the fit is dropped the rows stay without their targets (``zero-targets``)
+    instead of the restart from the prior. Our extension."""
     stay_optimism: bool = True
     """With ``target = sample`` or ``sample-greedy``: whether a target whose window ends where it
     began (s_{t+n} equal to s_t, as after an action that does not move the agent: MiniGrid's

@@ -89,17 +89,23 @@ def restart_at_switch(
     (:meth:`BLRHead.forget_targets`, ``zero-targets``), or refitted to the replay's ``rows``
     by fitted Q-iteration from the prior (:func:`farsighter.ops.refit.refit`, ``refit``: each
     row weighs a step's ``data_weight``; from the prior alone where ``rows`` is None, a switch
-    before the features were trained); the targets' mean with it, so every value the optimism
-    inflated starts again from what the rewards give."""
+    before the features were trained, or the fit rejected; ``refit-zero``: the rows kept
+    without their targets in those cases instead); the targets' mean with it, so every value
+    the optimism inflated starts again from what the rewards give."""
     mode = cfg.blr.switch_restart
     if mode == "none" or cfg.blr.mode != "incremental":
         return
-    if mode == "zero-targets":
+    if mode == "zero-targets" or (mode == "refit-zero" and rows is None):
         head.forget_targets()
+    elif mode in ("refit", "refit-zero") and rows is not None:  # (None: no features trained yet)
+        kept = head.state_dict() if mode == "refit-zero" else None
+        head.restart()
+        fit = refit(head, rows(), cfg.blr.data_weight, count=cfg.batch_size / cfg.train_every)
+        if kept is not None and not fit.accepted:  # the rows without their targets instead
+            head.load_state_dict(kept)
+            head.forget_targets()
     else:
         head.restart()
-        if mode == "refit" and rows is not None:  # (None: no features trained yet)
-            refit(head, rows(), cfg.blr.data_weight, count=cfg.batch_size / cfg.train_every)
     target_mean_AD.copy_(head.mean_AD)
 
 

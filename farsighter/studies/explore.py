@@ -506,6 +506,14 @@ AGENTS: tuple[Agent, ...] = (
         "farsighter",
         {"blr.stay_optimism": False, "blr.switch_restart": "zero-targets", "blr.cut_delay": 3.0},
     ),
+    # the same with the refit at the switch, the rows kept without their targets where the
+    # fit is dropped (blr.switch_restart refit-zero): the found path kept where the fit is
+    # sound (deep sea), the rooms' inflated values zeroed where it overestimates (DoorKey)
+    Agent(
+        "Farsighter (no optimism in place, refit or zero targets, cut delay 3)",
+        "farsighter",
+        {"blr.stay_optimism": False, "blr.switch_restart": "refit-zero", "blr.cut_delay": 3.0},
+    ),
     # the acting draws at the posterior's own width (the default before the draws were widened
     # to the action gaps, blr.act_width action-gap)
     Agent("Farsighter (posterior width)", "farsighter", {"blr.act_width": "posterior"}),
@@ -546,6 +554,7 @@ _NAMED_ONLY = (
     "Farsighter (no optimism in place)",
     "Farsighter (no optimism in place, redraw revisit)",
     "Farsighter (no optimism in place, zero targets, cut delay 3)",
+    "Farsighter (no optimism in place, refit or zero targets, cut delay 3)",
     "Farsighter (posterior width)",
     "Farsighter (refit at switch)",
 )
