@@ -621,6 +621,28 @@ ENTRIES = (
         3065,
     ),
     Entry(
+        "explore/doorkey5-s40",
+        "explore --families doorkey --sizes 5 --seeds 1 2 3 4 5 --agents Farsighter --workers 2",
+        "MiniGrid DoorKey-5x5 with the defaults of session 39 (the posterior refitted at the "
+        "switch), 5 seeds, 100k steps",
+        1210,
+    ),
+    Entry(
+        "explore/refit-zero-deepsea20",
+        "explore --families deepsea --sizes 20 --agents "
+        "'Farsighter (no optimism in place, refit or zero targets, cut delay 3)' --workers 1",
+        "deep sea N = 20 with the refit at the switch, zeroed targets where the fit is rejected, "
+        "no optimism in place and the cut past 3 steps of delay, 5 seeds",
+        618,
+    ),
+    Entry(
+        "explore/refit-zero-doorkey5",
+        "explore --families doorkey --sizes 5 --agents "
+        "'Farsighter (no optimism in place, refit or zero targets, cut delay 3)' --workers 1",
+        "the same agent on MiniGrid DoorKey-5x5, 5 seeds, 100k steps",
+        1505,
+    ),
+    Entry(
         "minatar",
         "atari --games minatar --agents DDQN BDQN Farsighter --seeds 1 2 --steps 50000 "
         "--eval-every 10000 --eval-episodes 10",
