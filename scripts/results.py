@@ -621,6 +621,15 @@ ENTRIES = (
         3065,
     ),
     Entry(
+        "explore/deepsea30-s40",
+        "explore --families deepsea --sizes 30 --seeds 1 2 3 --agents Farsighter --workers 1 "
+        "--episodes 6000",
+        "deep sea N = 30 with the defaults of session 39, the three seeds that 3,000 episodes "
+        "censored in explore/deepsea-growth-s39, given 6,000 (their first 3,000 episodes are "
+        "those runs')",
+        2846,
+    ),
+    Entry(
         "explore/doorkey5-s40",
         "explore --families doorkey --sizes 5 --seeds 1 2 3 4 5 --agents Farsighter --workers 2",
         "MiniGrid DoorKey-5x5 with the defaults of session 39 (the posterior refitted at the "
