@@ -114,6 +114,9 @@ RUNS: dict[str, tuple[str, str, int, dict[str, Any]]] = {
     # ... and past a first positive reward after its first update (the chain L = 10 pays at step
     # 1,208, learning_starts 1,000): the posterior refitted to the replay (blr.switch_restart)
     "farsighter-general-chain10": ("farsighter", "farsighter/Chain10-v0", 3_000, GENERAL),
+    # ... and where a step can leave the agent where it was (FrozenLake's walls): no draw in a
+    # target whose window ends where it began (blr.stay_optimism False, session 40)
+    "farsighter-general-frozenlake": ("farsighter", "FrozenLake-v1", 3_000, GENERAL),
 }
 
 

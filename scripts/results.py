@@ -652,6 +652,48 @@ ENTRIES = (
         1505,
     ),
     Entry(
+        "explore/refit-zero-deepsea1014",
+        "explore --families deepsea --sizes 10 14 --agents "
+        "'Farsighter (no optimism in place, refit or zero targets, cut delay 3)' --workers 1",
+        "the same agent on deep sea N = 10 and 14, 5 seeds",
+        410,
+    ),
+    Entry(
+        "explore/refit-zero-driftchain",
+        "explore --families driftchain --sizes 10 14 20 --agents "
+        "'Farsighter (no optimism in place, refit or zero targets, cut delay 3)' --workers 1",
+        "the same agent on the drifting lock L = 10, 14 and 20, 5 seeds",
+        770,
+    ),
+    Entry(
+        "explore/refit-zero-chain",
+        "explore --families chain --sizes 5 10 30 --agents "
+        "'Farsighter (no optimism in place, refit or zero targets, cut delay 3)' --workers 1",
+        "the same agent on the chain L = 5, 10 and 30, 5 seeds",
+        328,
+    ),
+    Entry(
+        "explore/refit-zero-frozenlake",
+        "explore --families frozenlake --sizes 4 --agents "
+        "'Farsighter (no optimism in place, refit or zero targets, cut delay 3)' --workers 1",
+        "the same agent on FrozenLake 4 x 4, 5 seeds",
+        448,
+    ),
+    Entry(
+        "explore/refit-zero-empty",
+        "explore --families empty --sizes 5 --agents "
+        "'Farsighter (no optimism in place, refit or zero targets, cut delay 3)' --workers 1",
+        "the same agent on MiniGrid Empty-5x5, 5 seeds",
+        987,
+    ),
+    Entry(
+        "explore/refit-zero-deepsea-stochastic",
+        "explore --families deepsea-stochastic --sizes 10 --agents "
+        "'Farsighter (no optimism in place, refit or zero targets, cut delay 3)' --workers 1",
+        "the same agent on stochastic deep sea N = 10, 5 seeds",
+        88,
+    ),
+    Entry(
         "minatar",
         "atari --games minatar --agents DDQN BDQN Farsighter --seeds 1 2 --steps 50000 "
         "--eval-every 10000 --eval-episodes 10",

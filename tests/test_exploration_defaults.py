@@ -634,7 +634,10 @@ def test_auto_gives_discrete_tasks_the_general_preset_and_keeps_table_1_selectab
     # acting draws widened to the action gaps, Farsighter's alone
     assert (defaults.blr.act_width, bdqn.blr.act_width) == ("action-gap", "posterior")
     # ... and the posterior refitted to the replay at the switch, Farsighter's alone
-    assert (defaults.blr.switch_restart, bdqn.blr.switch_restart) == ("refit", "none")
+    assert (defaults.blr.switch_restart, bdqn.blr.switch_restart) == ("refit-zero", "none")
+    # ... no draw for staying put, the cut past 3 steps of delay: Farsighter's alone
+    assert (defaults.blr.stay_optimism, bdqn.blr.stay_optimism) == (False, True)
+    assert (defaults.blr.cut_delay, bdqn.blr.cut_delay) == (3.0, 0.0)
     control = make_config("farsighter", "CartPole-v1", preset="control")
     assert (control.blr.switch_restart, control.blr.optimism) == ("none", "always")
     assert make_config("farsighter", "CartPole-v1", preset="control").blr.act_width == "posterior"
@@ -941,11 +944,11 @@ def _chain8_runs(tmp_path: Path, variants: dict[str, dict], steps: int) -> dict[
 
 def test_stay_optimism_false_is_the_default_run_where_every_step_moves(tmp_path: Path) -> None:
     """On the chain every step moves the agent or ends the episode (no bootstrap), so a run with
-    blr.stay_optimism False is the default run bit for bit (the general preset, 1,500 steps,
-    through its first reward and the switch)."""
+    blr.stay_optimism True is the default run (False) bit for bit (the general preset, 1,500
+    steps, through its first reward and the switch)."""
     from tests.test_seeds import _files, _same_states
 
-    runs = _chain8_runs(tmp_path, {"plain": {}, "moves": {"blr__stay_optimism": False}}, 1_500)
+    runs = _chain8_runs(tmp_path, {"plain": {}, "moves": {"blr__stay_optimism": True}}, 1_500)
     assert runs["plain"]["calibrated"]  # it switched
     _same_states(runs["plain"], runs["moves"])
     assert _files(tmp_path / "plain") == _files(tmp_path / "moves")

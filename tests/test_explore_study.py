@@ -286,7 +286,7 @@ def test_agents_are_one_config_each_on_the_auto_preset(tmp_path: Path) -> None:
             "Farsighter (redraw k)",
             "Farsighter (random features)",
             "Farsighter (data weight 100)",
-            "Farsighter (refit at switch)",
+            "Farsighter (no optimism in place, refit or zero targets, cut delay 3)",
         )
     ]
     assert len({repr(dataclasses.replace(c, run_dir="")) for c in every}) == len(every)
@@ -308,20 +308,36 @@ def test_agents_are_one_config_each_on_the_auto_preset(tmp_path: Path) -> None:
     )
     assert (switch.blr.optimism, switch.blr.calibrated_k_target) == ("until-reward", "cut")
     default = run_config(by["Farsighter"], QUICK, 3, tmp_path, (chain_id(10), 1))
-    # the defaults up to session 36: the default but for the targets kept at the switch
-    kept = dataclasses.replace(default.blr, switch_restart="none")
+    # session 39's defaults: the default but for the prior where the refit is rejected, the
+    # draw for staying put and the cut at every exploratory action
+    s39 = dataclasses.replace(default.blr, stay_optimism=True, cut_delay=0.0)
+    assert (default.blr.stay_optimism, default.blr.cut_delay) == (False, 3.0)
+    # the defaults up to session 36: session 39's but for the targets kept at the switch
+    kept = dataclasses.replace(s39, switch_restart="none")
     assert dataclasses.replace(switch, run_dir="") == dataclasses.replace(
         default, run_dir="", blr=kept
     )
     # the defaults of sessions 37 and 38: the posterior restarted from the prior alone; since
     # session 39 refitted
     restart = run_config(by["Farsighter (switch restart)"], QUICK, 3, tmp_path, (chain_id(10), 1))
-    prior = dataclasses.replace(default.blr, switch_restart="prior")
+    prior = dataclasses.replace(s39, switch_restart="prior")
     assert dataclasses.replace(restart, run_dir="") == dataclasses.replace(
         default, run_dir="", blr=prior
     )
     refitted = run_config(by["Farsighter (refit at switch)"], QUICK, 3, tmp_path, (chain_id(10), 1))
-    assert dataclasses.replace(refitted, run_dir="") == dataclasses.replace(default, run_dir="")
+    refit = dataclasses.replace(s39, switch_restart="refit")
+    assert dataclasses.replace(refitted, run_dir="") == dataclasses.replace(
+        default, run_dir="", blr=refit
+    )
+    # since session 40 the default: the refit, zeroed targets where it is rejected
+    same = run_config(
+        by["Farsighter (no optimism in place, refit or zero targets, cut delay 3)"],
+        QUICK,
+        3,
+        tmp_path,
+        (chain_id(10), 1),
+    )
+    assert dataclasses.replace(same, run_dir="") == dataclasses.replace(default, run_dir="")
     # the variants of the targets keep them for the whole run, as when their studies were made
     for label in ("Farsighter (mean, k-step target)", "Farsighter (cut)"):
         assert run_config(by[label], QUICK, 3, tmp_path, (chain_id(10), 1)).blr.optimism == "always"

@@ -92,7 +92,7 @@ class BLRConfig:
     prior (statistics zeroed, sigma_eps and the prior sigma as configured, mean 0 at the
     prior's width) and the targets' mean with it. zero-targets: the rows but not their targets
     (the sums of y set to 0, as if every earlier target had been 0), so the mean restarts at 0
-    and the width stays what the rows made it. refit (the general preset's, for Farsighter):
+    and the width stays what the rows made it. refit (the general preset's in session 39):
     from the prior, the posterior refitted to the latest 50,000 rows of the replay (each
     weighing a step's ``data_weight``) with the calibrated targets iterated to their fixed
     point (fitted Q-iteration, at most 200 iterations), and the targets' mean with it; the fit
@@ -106,9 +106,12 @@ class BLRConfig:
     which deep sea pays for by bsuite's criterion (N = 20: prior 3/5, none 4/5, refit 4/5);
     refit takes the found path at once; on Taxi its fit overestimates (targets up to 46.7
     where no reward sum exceeds 20) and is dropped, as the unchecked fit's greedy policy
-    repeated illegal pickups (final evaluation -736 to -911 against -200). refit-zero: refit,
-    but where the fit is dropped the rows stay without their targets (``zero-targets``)
-    instead of the restart from the prior. Our extension."""
+    repeated illegal pickups (final evaluation -736 to -911 against -200). refit-zero (the
+    general preset's, for Farsighter): refit, but where the fit is dropped the rows stay
+    without their targets (``zero-targets``) instead of the restart from the prior: MiniGrid
+    DoorKey-5x5 (its fit rejected) 2/5 with ``stay_optimism`` False and ``cut_delay`` 3, 0/5
+    with refit (docs/design.md "The refit where it is sound, the targets zeroed where it is
+    not"). Our extension."""
     stay_optimism: bool = True
     """With ``target = sample`` or ``sample-greedy``: whether a target whose window ends where it
     began (s_{t+n} equal to s_t, as after an action that does not move the agent: MiniGrid's
@@ -119,7 +122,8 @@ class BLRConfig:
     held draw repeats it (DoorKey-5x5: docs/design.md); posterior sampling over a whole value
     function pays no such bonus for a self-loop. On a task whose every step moves the agent or
     ends the episode (the chain, tested; deep sea) a run is the run with True bit for bit.
-    DoorKey-5x5 with it: 0/3 (docs/design.md). Our extension."""
+    DoorKey-5x5 with it: 0/3 (docs/design.md). The general preset's Farsighter: False (with
+    ``switch_restart`` refit-zero and ``cut_delay`` 3, session 40). Our extension."""
     rearm_episodes: int = 0
     """With ``optimism = until-reward``: after this many episodes in a row that paid no positive
     reward since the switch, the targets' optimism again, until the next positive reward
@@ -144,7 +148,8 @@ class BLRConfig:
     a wrong turn costs a step or two, which at gamma = 0.99 is a gap of about 0.01 V, below
     what the values resolve, and cutting there shrinks every window to a step; a move that
     ends the episode short of the reward (the chain's) costs all of V and is cut at once. 0:
-    wherever the draw and the mean differ (with ``cut_margin`` 0, Watkins). Our extension."""
+    wherever the draw and the mean differ (with ``cut_margin`` 0, Watkins). The general
+    preset's Farsighter: 3 (session 40; the chain L = 30 held 5/5 with it). Our extension."""
     target_noise_scale: float = 1.0
     """With target = sample or sample-greedy: a factor on the draw added to the next state's value
     (1: the posterior's own width). The draw's upward bias (the largest of the actions' draws,

@@ -339,6 +339,11 @@ _KEPT = {"blr.switch_restart": "none"}
 """Pinned by the agents measured when the posterior kept its optimistic targets at the switch
 (the general preset restarts it from its prior since session 37), so that their names still
 say what their results in docs/results are."""
+_S39 = {"blr.switch_restart": "refit", "blr.stay_optimism": True, "blr.cut_delay": 0.0}
+"""The general preset's Farsighter of session 39, before the rows kept without their targets
+where the refit is rejected, no draw for staying put and the cut past 3 steps of delay became
+its defaults (session 40): pinned by the agents that vary one of those pieces, so that they
+stay apart from the default."""
 
 AGENTS: tuple[Agent, ...] = (
     Agent("DDQN", "ddqn"),
@@ -443,62 +448,64 @@ AGENTS: tuple[Agent, ...] = (
     Agent(
         "Farsighter (optimism until reward, then cut)",
         "farsighter",
-        {"blr.optimism": "until-reward", "blr.calibrated_k_target": "cut", **_KEPT},
+        {"blr.optimism": "until-reward", "blr.calibrated_k_target": "cut", **_S39, **_KEPT},
     ),
     # the cut only where the posterior is sure the action taken was worse (blr.cut_margin)
-    Agent("Farsighter (cut margin 1)", "farsighter", {"blr.cut_margin": 1.0, **_KEPT}),
+    Agent("Farsighter (cut margin 1)", "farsighter", {"blr.cut_margin": 1.0, **_S39, **_KEPT}),
     # the posterior restarted from its prior at the switch (blr.switch_restart prior): its mean
     # fit to the calibrated targets alone, its width the prior's again where the run has not been
     # since; or its targets zeroed (zero-targets): the mean from 0, the width kept. The first was
     # the default in sessions 37 and 38
-    Agent("Farsighter (switch restart)", "farsighter", {"blr.switch_restart": "prior"}),
+    Agent("Farsighter (switch restart)", "farsighter", {**_S39, "blr.switch_restart": "prior"}),
     Agent(
         "Farsighter (switch restart, k-step)",
         "farsighter",
-        {"blr.switch_restart": "prior", "blr.calibrated_k_target": "k"},
+        {**_S39, "blr.switch_restart": "prior", "blr.calibrated_k_target": "k"},
     ),
     Agent(
         "Farsighter (switch restart, cut margin 1)",
         "farsighter",
-        {"blr.switch_restart": "prior", "blr.cut_margin": 1.0},
+        {**_S39, "blr.switch_restart": "prior", "blr.cut_margin": 1.0},
     ),
-    Agent("Farsighter (zero targets)", "farsighter", {"blr.switch_restart": "zero-targets"}),
+    Agent(
+        "Farsighter (zero targets)", "farsighter", {**_S39, "blr.switch_restart": "zero-targets"}
+    ),
     # or refitted to the replay by fitted Q-iteration (blr.switch_restart refit): the values the
     # rewards confirm (the found path, the learned penalties) without the optimism's, a fit that
-    # passes the largest reward sum the replay showed dropped (session 38; the default since
-    # session 39, the same config as "Farsighter": docs/design.md "The posterior refitted at
-    # the switch")
-    Agent("Farsighter (refit at switch)", "farsighter", {"blr.switch_restart": "refit"}),
+    # passes the largest reward sum the replay showed dropped (session 38; the default in
+    # session 39: docs/design.md "The posterior refitted at the switch"; with the rest of the
+    # defaults since)
+    Agent("Farsighter (refit at switch)", "farsighter", {**_S39}),
     Agent(
         "Farsighter (zero targets, cut margin 1)",
         "farsighter",
-        {"blr.switch_restart": "zero-targets", "blr.cut_margin": 1.0},
+        {**_S39, "blr.switch_restart": "zero-targets", "blr.cut_margin": 1.0},
     ),
     # the cut only where the action taken costs more than 3 steps of delay (blr.cut_delay)
     Agent(
         "Farsighter (zero targets, cut delay 3)",
         "farsighter",
-        {"blr.switch_restart": "zero-targets", "blr.cut_delay": 3.0},
+        {**_S39, "blr.switch_restart": "zero-targets", "blr.cut_delay": 3.0},
     ),
     # the same delay rule with the optimistic targets kept at the switch (no restart)
-    Agent("Farsighter (cut delay 3)", "farsighter", {"blr.cut_delay": 3.0, **_KEPT}),
+    Agent("Farsighter (cut delay 3)", "farsighter", {**_S39, "blr.cut_delay": 3.0, **_KEPT}),
     # the optimism taken up again after 10 episodes in a row unpaid since the switch
     # (blr.rearm_episodes), with the default cut and with the cut past 3 steps of delay
-    Agent("Farsighter (rearm 10)", "farsighter", {"blr.rearm_episodes": 10}),
+    Agent("Farsighter (rearm 10)", "farsighter", {**_S39, "blr.rearm_episodes": 10}),
     Agent(
         "Farsighter (rearm 10, cut delay 3)",
         "farsighter",
-        {"blr.rearm_episodes": 10, "blr.cut_delay": 3.0},
+        {**_S39, "blr.rearm_episodes": 10, "blr.cut_delay": 3.0},
     ),
     # no draw in a target whose window ends where it began (blr.stay_optimism False): no
     # optimism for staying put
-    Agent("Farsighter (no optimism in place)", "farsighter", {"blr.stay_optimism": False}),
+    Agent("Farsighter (no optimism in place)", "farsighter", {**_S39, "blr.stay_optimism": False}),
     # and the draw redrawn when the episode returns to an observation it saw (blr.redraw
     # revisit), so a held draw does not repeat an action that leaves the agent where it is
     Agent(
         "Farsighter (no optimism in place, redraw revisit)",
         "farsighter",
-        {"blr.stay_optimism": False, "blr.redraw": "revisit"},
+        {**_S39, "blr.stay_optimism": False, "blr.redraw": "revisit"},
     ),
     # and with the targets zeroed at the switch and the cut past 3 steps of delay
     Agent(
@@ -508,7 +515,8 @@ AGENTS: tuple[Agent, ...] = (
     ),
     # the same with the refit at the switch, the rows kept without their targets where the
     # fit is dropped (blr.switch_restart refit-zero): the found path kept where the fit is
-    # sound (deep sea), the rooms' inflated values zeroed where it overestimates (DoorKey)
+    # sound (deep sea), the rooms' inflated values zeroed where it overestimates (DoorKey); the
+    # default since session 40, the same config as "Farsighter"
     Agent(
         "Farsighter (no optimism in place, refit or zero targets, cut delay 3)",
         "farsighter",
