@@ -472,9 +472,8 @@ AGENTS: tuple[Agent, ...] = (
     ),
     # or refitted to the replay by fitted Q-iteration (blr.switch_restart refit): the values the
     # rewards confirm (the found path, the learned penalties) without the optimism's, a fit that
-    # passes the largest reward sum the replay showed dropped (session 38; the default in
-    # session 39: docs/design.md "The posterior refitted at the switch"; with the rest of the
-    # defaults since)
+    # passes the largest reward sum the replay showed dropped (session 38): session 39's
+    # default, pinned (docs/design.md "The posterior refitted at the switch")
     Agent("Farsighter (refit at switch)", "farsighter", {**_S39}),
     Agent(
         "Farsighter (zero targets, cut margin 1)",
