@@ -42,6 +42,9 @@ class Entry:
     earlier: int  # seconds it took when made by hand at an earlier commit (docs/results/README)
 
 
+_REFIT_ZERO = "'Farsighter (no optimism in place, refit or zero targets, cut delay 3)'"
+"""The agent of the refit-zero screens (session 40; the default's config since)."""
+
 ENTRIES = (
     Entry(
         "maze",
@@ -638,60 +641,27 @@ ENTRIES = (
     ),
     Entry(
         "explore/refit-zero-deepsea20",
-        "explore --families deepsea --sizes 20 --agents "
-        "'Farsighter (no optimism in place, refit or zero targets, cut delay 3)' --workers 1",
+        f"explore --families deepsea --sizes 20 --agents {_REFIT_ZERO} --workers 1",
         "deep sea N = 20 with the refit at the switch, zeroed targets where the fit is rejected, "
         "no optimism in place and the cut past 3 steps of delay, 5 seeds",
         618,
     ),
-    Entry(
-        "explore/refit-zero-doorkey5",
-        "explore --families doorkey --sizes 5 --agents "
-        "'Farsighter (no optimism in place, refit or zero targets, cut delay 3)' --workers 1",
-        "the same agent on MiniGrid DoorKey-5x5, 5 seeds, 100k steps",
-        1505,
-    ),
-    Entry(
-        "explore/refit-zero-deepsea1014",
-        "explore --families deepsea --sizes 10 14 --agents "
-        "'Farsighter (no optimism in place, refit or zero targets, cut delay 3)' --workers 1",
-        "the same agent on deep sea N = 10 and 14, 5 seeds",
-        410,
-    ),
-    Entry(
-        "explore/refit-zero-driftchain",
-        "explore --families driftchain --sizes 10 14 20 --agents "
-        "'Farsighter (no optimism in place, refit or zero targets, cut delay 3)' --workers 1",
-        "the same agent on the drifting lock L = 10, 14 and 20, 5 seeds",
-        770,
-    ),
-    Entry(
-        "explore/refit-zero-chain",
-        "explore --families chain --sizes 5 10 30 --agents "
-        "'Farsighter (no optimism in place, refit or zero targets, cut delay 3)' --workers 1",
-        "the same agent on the chain L = 5, 10 and 30, 5 seeds",
-        328,
-    ),
-    Entry(
-        "explore/refit-zero-frozenlake",
-        "explore --families frozenlake --sizes 4 --agents "
-        "'Farsighter (no optimism in place, refit or zero targets, cut delay 3)' --workers 1",
-        "the same agent on FrozenLake 4 x 4, 5 seeds",
-        448,
-    ),
-    Entry(
-        "explore/refit-zero-empty",
-        "explore --families empty --sizes 5 --agents "
-        "'Farsighter (no optimism in place, refit or zero targets, cut delay 3)' --workers 1",
-        "the same agent on MiniGrid Empty-5x5, 5 seeds",
-        987,
-    ),
-    Entry(
-        "explore/refit-zero-deepsea-stochastic",
-        "explore --families deepsea-stochastic --sizes 10 --agents "
-        "'Farsighter (no optimism in place, refit or zero targets, cut delay 3)' --workers 1",
-        "the same agent on stochastic deep sea N = 10, 5 seeds",
-        88,
+    *(
+        Entry(
+            f"explore/refit-zero-{name}",
+            f"explore --families {family} --sizes {sizes} --agents {_REFIT_ZERO} --workers 1",
+            f"the same agent on {tasks}, 5 seeds",
+            seconds,
+        )
+        for name, family, sizes, tasks, seconds in (
+            ("doorkey5", "doorkey", "5", "MiniGrid DoorKey-5x5 (100k steps)", 1505),
+            ("deepsea1014", "deepsea", "10 14", "deep sea N = 10 and 14", 410),
+            ("driftchain", "driftchain", "10 14 20", "the drifting lock L = 10, 14 and 20", 770),
+            ("chain", "chain", "5 10 30", "the chain L = 5, 10 and 30", 328),
+            ("frozenlake", "frozenlake", "4", "FrozenLake 4 x 4", 448),
+            ("empty", "empty", "5", "MiniGrid Empty-5x5", 987),
+            ("deepsea-stochastic", "deepsea-stochastic", "10", "stochastic deep sea N = 10", 88),
+        )
     ),
     Entry(
         "minatar",
