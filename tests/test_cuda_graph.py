@@ -171,7 +171,7 @@ def test_graphed_updates_equal_eager_updates(
     np.testing.assert_allclose(graphed_losses, eager_losses, rtol=1e-4, atol=1e-6)
     for a, b in zip(_params(graphed), _params(eager), strict=True):
         torch.testing.assert_close(a, b, rtol=1e-4, atol=1e-5)
-    if algo != "ddqn":
+    if algo in ("bdqn", "farsighter"):  # the agents with a BLR head
         torch.testing.assert_close(graphed.head.mean_AD, eager.head.mean_AD, rtol=1e-4, atol=1e-5)
 
 
@@ -225,3 +225,26 @@ def test_cuda_graph_on_without_a_gpu_is_refused_before_the_run_dir(tmp_path: Pat
     with pytest.raises(ConfigError, match="needs a CUDA device"):
         train(cfg)
     assert not (tmp_path / "run").exists()
+
+
+def _cuda_generator_state(seed: int, offset: int) -> torch.Tensor:
+    """A CUDA generator's saved state (its seed and offset, 16 bytes), made without a GPU."""
+    return torch.tensor(np.array([seed, offset], dtype=np.int64).view(np.uint8))
+
+
+def test_a_checkpoint_saved_on_another_device_loads(tmp_path: Path) -> None:
+    """A GPU run's agent loads on a CPU (``load_agent``, a resume): its generator's state has
+    another form, so the generator is seeded from the saved bytes: the same draws for the same
+    checkpoint, other draws for another."""
+    gpu_state = _agent(tmp_path / "saved", "farsighter").state_dict()
+    draws = []
+    for seed in (7, 7, 8):
+        gpu_state["gen"] = _cuda_generator_state(seed, 4)
+        if CUDA:  # the real thing where there is one
+            gen = torch.Generator(device="cuda")
+            gen.manual_seed(seed)
+            gpu_state["gen"] = gen.get_state()
+        agent = _agent(tmp_path / f"loaded{len(draws)}", "farsighter")
+        agent.load_state_dict(gpu_state)
+        draws.append(torch.rand(5, generator=agent.gen))
+    assert torch.equal(draws[0], draws[1]) and not torch.equal(draws[0], draws[2])

@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import copy
 import dataclasses
+import hashlib
 import warnings
 from collections.abc import Iterable, Sequence
 from dataclasses import dataclass
@@ -338,6 +339,19 @@ def save_state(agent: Any, names: Sequence[str], include_replay: bool) -> dict[s
     return state
 
 
+def set_generator_state(gen: torch.Generator, state: torch.Tensor) -> None:
+    """``gen.set_state(state)``; where ``state`` was saved by a generator of another device, whose
+    state has another form (a CUDA generator's 16 bytes against a CPU one's Mersenne Twister: a
+    GPU run loaded or resumed on a CPU, or back), ``gen`` is seeded from the saved bytes instead:
+    the same draws for the same checkpoint, though not the stream the saving generator would have
+    drawn next."""
+    if state.numel() == gen.get_state().numel():
+        gen.set_state(state)
+        return
+    digest = hashlib.sha256(state.cpu().numpy().tobytes()).digest()
+    gen.manual_seed(int.from_bytes(digest[:8], "little") >> 1)
+
+
 def load_state(agent: Any, names: Sequence[str], state: dict[str, Any]) -> None:
     """Inverse of :func:`save_state`. A checkpoint saved without its replay makes the agent
     refill before it updates again (``Counters.hold_pending``)."""
@@ -346,7 +360,7 @@ def load_state(agent: Any, names: Sequence[str], state: dict[str, Any]) -> None:
         if isinstance(current, np.random.Generator):
             current.bit_generator.state = value
         elif isinstance(current, torch.Generator):
-            current.set_state(value)
+            set_generator_state(current, value)
         elif dataclasses.is_dataclass(current):
             for key, item in value.items():
                 setattr(current, key, item)
