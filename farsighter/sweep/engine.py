@@ -8,6 +8,7 @@ progress bar over all jobs. Where the jobs run is a :class:`Backend`:
 * local processes (the default): each job in a fresh spawned interpreter, ``workers`` at once.
   A job whose process dies (killed, out of memory) or raises is started again, up to
   ``retries`` times; an input error (:class:`~farsighter.errors.FarsighterError`) is not retried.
+  The workers end with this process (stopped by SIGTERM, or killed).
 * Ray (``ray=True``): each job a Ray task with ``cpus`` and ``gpus`` of its own, at most
   ``workers`` in flight (0: as many as the cluster's resources allow). Ray restarts a task whose
   worker died or that raised, up to ``retries`` times.
@@ -22,8 +23,10 @@ from __future__ import annotations
 
 import ipaddress
 import multiprocessing as mp
+import multiprocessing.managers
 import os
 import re
+import signal
 import socket
 import sys
 import tempfile
@@ -206,14 +209,39 @@ def _in_process(
         bar.update(n)
 
 
+PARENT_GONE_EXIT = 4
+"""Exit code of a worker (or the manager process) that ended because the process that started
+it is gone."""
+
+PARENT_WATCH_SECONDS = 1.0
+"""How often a worker checks that the process that started it is still there."""
+
+
+def exit_with_parent(parent: int) -> None:
+    """End this process (exit code :data:`PARENT_GONE_EXIT`) once the process ``parent`` that
+    started it is gone, killed even by SIGKILL, which runs no clean-up there: a worker (and the
+    manager process that carries the progress) does not run on as an orphan, training a run
+    nobody waits for. A daemon thread polls the parent's pid every
+    :data:`PARENT_WATCH_SECONDS`."""
+
+    def watch() -> None:
+        while os.getppid() == parent:
+            time.sleep(PARENT_WATCH_SECONDS)
+        os._exit(PARENT_GONE_EXIT)
+
+    threading.Thread(target=watch, name="farsighter-parent-watch", daemon=True).start()
+
+
 def _child(
     fn: Callable[..., Any],
     job: tuple[Any, ...],
     progress: MutableMapping[str, int],
     errors: MutableMapping[int, str],
     index: int,
+    parent: int,
 ) -> None:
-    """A worker process: one job; its error goes to the parent as text."""
+    """A worker process: one job; its error goes to the parent as text; it ends with its parent."""
+    exit_with_parent(parent)
     try:
         fn(*job, progress)
     except FarsighterError as exc:
@@ -222,6 +250,26 @@ def _child(
     except BaseException:
         errors[index] = traceback.format_exc()
         raise
+
+
+@contextmanager
+def _terminate_raises_exit() -> Iterator[None]:
+    """SIGTERM (``kill``, a scheduler's stop) raises SystemExit in this process while the block
+    runs, so that its clean-up (the workers stopped, the manager shut down) runs, which Python's
+    default SIGTERM skips. Only in the main thread, where Python delivers signals; the previous
+    handler is restored after."""
+    if threading.current_thread() is not threading.main_thread():
+        yield
+        return
+
+    def stop(signum: int, frame: Any) -> None:
+        raise SystemExit(128 + signum)
+
+    previous = signal.signal(signal.SIGTERM, stop)
+    try:
+        yield
+    finally:
+        signal.signal(signal.SIGTERM, previous)
 
 
 def _on_processes(
@@ -233,10 +281,15 @@ def _on_processes(
     done_before: int,
 ) -> None:
     """Each job in its own spawned interpreter (nothing shared by accident, and a dead process
-    harms no other job), ``workers`` at once, restarted when it dies or raises."""
+    harms no other job), ``workers`` at once, restarted when it dies or raises. A SIGTERM to
+    this process stops the workers before it exits; killed outright, its workers and manager
+    process end by themselves (:func:`exit_with_parent`)."""
     ctx = mp.get_context("spawn")
     workers = backend.local_workers
-    with ctx.Manager() as manager:
+    parent = os.getpid()
+    manager = multiprocessing.managers.SyncManager(ctx=ctx)
+    manager.start(exit_with_parent, (parent,))  # the progress's process, ended with this one
+    with manager, _terminate_raises_exit():
         shared, errors = manager.dict(), manager.dict()
         todo: deque[int] = deque(range(len(jobs)))
         running: dict[int, Any] = {}
@@ -248,7 +301,7 @@ def _on_processes(
                     i = todo.popleft()
                     attempts[i] += 1
                     proc = ctx.Process(
-                        target=_child, args=(fn, jobs[i], shared, errors, i), daemon=False
+                        target=_child, args=(fn, jobs[i], shared, errors, i, parent), daemon=False
                     )
                     proc.start()
                     running[i] = proc
