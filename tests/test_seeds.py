@@ -127,6 +127,19 @@ def _files(run: Path) -> dict[str, list[str]]:
                 "batch_size": 24,
             },
         ),
+        # advantage learning after each seed's switch, from the batch's target torsos
+        (
+            "farsighter",
+            "farsighter/Chain8-v0",
+            {
+                "preset": "general",
+                "blr__switch_restart": "refit-zero",
+                "blr__advantage_learning": 0.9,
+                "k": 3,
+                "learning_starts": 100,
+                "batch_size": 24,
+            },
+        ),
         # windows cut before exploratory actions from the start, where they cost more than two
         # steps of delay (the Chain8 case above cuts at every one)
         (

@@ -42,11 +42,7 @@ from farsighter.agents.common import (
     updates_owed,
 )
 from farsighter.agents.cuda_graph import Tensors
-from farsighter.agents.farsighter_loss import (
-    FarsighterLoss,
-    one_step_inputs,
-    uses_one_step,
-)
+from farsighter.agents.farsighter_loss import FarsighterLoss
 from farsighter.agents.farsighter_posterior import (
     RECENT_FEATURES,
     FarsighterCounters,
@@ -56,6 +52,7 @@ from farsighter.agents.farsighter_posterior import (
     replay_rows,
     seeded_torso,
 )
+from farsighter.agents.farsighter_targets import one_step_inputs, uses_one_step
 from farsighter.agents.learner import Learner, make_target_cache
 from farsighter.agents.protocol import AgentFactory
 from farsighter.config import Config

@@ -13,12 +13,24 @@ import torch
 
 from farsighter.agents.common import RecentRows, TensorBatch
 from farsighter.agents.cuda_graph import Tensors
-from farsighter.agents.farsighter_loss import eq8_targets, target_draws
 from farsighter.agents.farsighter_posterior import RECENT_FEATURES, FarsighterCounters, make_head
+from farsighter.agents.farsighter_targets import (
+    Targets,
+    advantage,
+    eq8_targets,
+    k_or_one_step,
+    one_step_batch,
+    one_step_draws,
+    same,
+    target_draws,
+)
 from farsighter.agents.learner import make_target_cache
 from farsighter.config import Config
 from farsighter.exploration import ThompsonExploration
 from farsighter.exploration.optimism import calibrated, restart_at_switch, without_staying
+
+Features = torch.Tensor | list[torch.Tensor]
+"""A batch's features of s', (S, B, D), or a list of S (the target caches')."""
 
 
 class SeedParts:
@@ -92,4 +104,40 @@ class SeedParts:
             draws,
             blr.center_sample,
             blr.target_noise_scale,
+        )
+
+    def targets(
+        self,
+        mine: Tensors,
+        k_step: tuple[torch.Tensor, Features],
+        one_step: tuple[torch.Tensor, Features] | None,
+        s: int,
+        with_one_step: bool,
+    ) -> torch.Tensor:
+        """This seed's (``s``) y of Eq. 8 on its rows ``mine`` and the batch's features of s'
+        (``k_step``: phi and phi_target of the k-step windows; ``one_step``: of the one-step
+        windows of ``k_target = max``): ``FarsighterLoss.__call__``'s targets."""
+        t, draws = TensorBatch.of(mine), self.draws(len(mine["actions_B"]), with_one_step)
+        nxt, nxt_target = k_step
+        y_B = self.y(t, nxt[s], nxt_target[s], draws)
+        if not with_one_step:
+            return y_B
+        assert one_step is not None
+        one, (one_next, one_next_target) = one_step_batch(t, mine), one_step
+        one_B = self.y(one, one_next[s], one_next_target[s], one_step_draws(draws))
+        if self.k_target == "max":
+            return k_or_one_step(y_B, one_B)
+        mean_B = self.y(t, nxt[s], nxt_target[s], {}, "mean")
+        return k_or_one_step(
+            y_B, one_B, mean_B, self.y(one, one_next[s], one_next_target[s], {}, "mean")
+        )
+
+    def advantage(self, phi_target_BD: torch.Tensor | None, actions_B: torch.Tensor) -> Targets:
+        """This seed's targets -> the same under ``blr.advantage_learning`` once it is calibrated
+        (``FarsighterLoss.advantage``), from the target features of the rows' start states."""
+        if not self.calibrated or phi_target_BD is None:
+            return same
+        phi_BD = phi_target_BD
+        return advantage(
+            self.blr.advantage_learning, lambda: phi_BD @ self.target_mean_AD.T, actions_B
         )

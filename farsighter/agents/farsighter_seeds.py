@@ -30,21 +30,19 @@ from farsighter.agents.common import (
     updates_owed,
 )
 from farsighter.agents.cuda_graph import Tensors
-from farsighter.agents.farsighter_loss import (
-    k_or_one_step,
-    max_targets,
-    one_step_batch,
-    one_step_draws,
-    one_step_inputs,
-    q_taken,
-    uses_one_step,
-)
 from farsighter.agents.farsighter_parts import SeedParts
 from farsighter.agents.farsighter_posterior import (
     accumulate,
     refresh_posterior,
     replay_rows,
     seeded_torso,
+)
+from farsighter.agents.farsighter_targets import (
+    Targets,
+    max_targets,
+    one_step_inputs,
+    q_taken,
+    uses_one_step,
 )
 from farsighter.agents.seed_members import FarsighterSeedMember, seed_replay, stack_refusal
 from farsighter.config import Config
@@ -208,8 +206,9 @@ class SeedBatchFarsighter:
                     self._target_features(next_SB, end_B, batch, psi),
                 )
         seeded = [{key: by_seed(x)[s] for key, x in inputs.items()} for s in range(S)]
+        gaps = self._advantage(by_seed(t.obs_B), seeded)  # blr.advantage_learning
         ys = [
-            self._targets(p, mine, features, s, one_step_S[s])
+            gaps[s](p.targets(mine, features[""], features.get("one_"), s, one_step_S[s]))
             for s, (p, mine) in enumerate(zip(self.parts, seeded, strict=True))
         ]
         phi_SBD = self.torso(by_seed(t.obs_B))
@@ -227,8 +226,19 @@ class SeedBatchFarsighter:
             for s, (p, mine, y_B) in enumerate(zip(self.parts, seeded, ys, strict=True)):
                 if cfg.blr.posterior_target != "double":
                     y_B = max_targets(TensorBatch.of(mine), features[""][1][s], p.target_mean_AD)
+                    y_B = gaps[s](y_B)
                 accumulate(cfg, p.head, p.recent_phi, phi_SBD[s].detach(), mine["actions_B"], y_B)
         return [loss.detach() for loss in losses]
+
+    @torch.no_grad()
+    def _advantage(self, obs_SB: torch.Tensor, seeded: list[Tensors]) -> list[Targets]:
+        """Each seed's :meth:`SeedParts.advantage`, from one forward of the target torsos."""
+        on = self.cfg.blr.advantage_learning and any(p.calibrated for p in self.parts)
+        phi_SBD = self.torso_target(obs_SB) if on else None
+        return [
+            p.advantage(None if phi_SBD is None else phi_SBD[s], mine["actions_B"])
+            for s, (p, mine) in enumerate(zip(self.parts, seeded, strict=True))
+        ]
 
     def _target_features(
         self,
@@ -252,24 +262,6 @@ class SeedBatchFarsighter:
             )
             for s, p in enumerate(self.parts)
         ]
-
-    def _targets(
-        self, p: SeedParts, mine: Tensors, features: Features, s: int, one_step: bool
-    ) -> torch.Tensor:
-        """Seed ``s``'s y of Eq. 8 on its features (``FarsighterLoss.__call__``'s targets)."""
-        t, draws = TensorBatch.of(mine), p.draws(len(mine["actions_B"]), one_step)
-        y_B = p.y(t, features[""][0][s], features[""][1][s], draws)
-        if not one_step:
-            return y_B
-        one = one_step_batch(t, mine)
-        one_next, one_next_target = features["one_"]
-        one_B = p.y(one, one_next[s], one_next_target[s], one_step_draws(draws))
-        if p.k_target == "max":
-            return k_or_one_step(y_B, one_B)
-        mean_B = p.y(t, features[""][0][s], features[""][1][s], {}, "mean")
-        return k_or_one_step(
-            y_B, one_B, mean_B, p.y(one, one_next[s], one_next_target[s], {}, "mean")
-        )
 
     def _refresh(self, s: int, p: SeedParts) -> None:
         """Algorithm 1 line 6 for one seed (``FarsighterAgent.refresh_posterior``): a batch-mode

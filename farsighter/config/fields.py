@@ -150,6 +150,16 @@ class BLRConfig:
     ends the episode short of the reward (the chain's) costs all of V and is cut at once. 0:
     wherever the draw and the mean differ (with ``cut_margin`` 0, Watkins). The general
     preset's Farsighter: 3 (session 40; the chain L = 30 held 5/5 with it). Our extension."""
+    advantage_learning: float = 0.0
+    """With ``optimism = until-reward``, after its switch: alpha of the advantage-learning
+    operator (Baird 1999; Bellemare et al. 2016, "Increasing the Action Gap"), every target
+    y of (s, a) lowered by alpha (max_b Q_target(s, b) - Q_target(s, a)), the target network's
+    gap between the greedy action and the one taken. At a fixed point the gaps between actions
+    grow by 1 / (1 - alpha), the greedy action's value unchanged. Where a wasted step costs
+    (1 - gamma) V (a turn, a pick up that changes nothing, a walk into a wall: about 0.01 V at
+    gamma = 0.99), a gap below what the values resolve, the posterior mean's greedy policy can
+    repeat such a step to the time limit while the draws, which move, get through. 0: off.
+    Our extension, from the paper's operator."""
     target_noise_scale: float = 1.0
     """With target = sample or sample-greedy: a factor on the draw added to the next state's value
     (1: the posterior's own width). The draw's upward bias (the largest of the actions' draws,
@@ -224,6 +234,15 @@ class BLRConfig:
             (
                 self.cut_delay >= 0 and math.isfinite(self.cut_delay),
                 f"blr.cut_delay must be a finite number >= 0 (got {self.cut_delay})",
+            ),
+            (
+                0 <= self.advantage_learning < 1,
+                f"blr.advantage_learning must be in [0, 1) (got {self.advantage_learning})",
+            ),
+            (
+                self.advantage_learning == 0 or self.optimism == "until-reward",
+                "blr.advantage_learning acts after blr.optimism until-reward's switch; with "
+                f"optimism {self.optimism} set it to 0, or set optimism until-reward",
             ),
             (
                 self.target_noise_scale >= 0 and math.isfinite(self.target_noise_scale),

@@ -99,3 +99,15 @@ def centered_optimism(
     and factor are 0, so the floored denominator changes nothing."""
     total = bootstrap_B.sum().clamp_min(torch.finfo(bootstrap_B.dtype).tiny)
     return y_B - bootstrap_B * ((y_B - y_mean_B).sum() / total)
+
+
+def advantage_learning(
+    y_B: torch.Tensor, q_target_BA: torch.Tensor, actions_B: torch.Tensor, alpha: float
+) -> torch.Tensor:
+    """The advantage-learning operator on targets (Baird 1999; Bellemare et al. 2016): the target
+    ``y_B`` of (s, a) lowered by ``alpha`` times the target network's gap at s between the
+    greedy action and the one taken, y - alpha (max_b Q_target(s, b) - Q_target(s, a)).
+    ``q_target_BA``: Q_target(s, .) of each row's start state s; the greedy action's target is
+    unchanged, every other action's lowered, so the fixed point's gaps grow by 1 / (1 - alpha)."""
+    gap_B = q_target_BA.max(dim=1).values - q_target_BA.gather(1, actions_B[:, None])[:, 0]
+    return y_B - alpha * gap_B

@@ -524,6 +524,10 @@ AGENTS: tuple[Agent, ...] = (
     # the acting draws at the posterior's own width (the default before the draws were widened
     # to the action gaps, blr.act_width action-gap)
     Agent("Farsighter (posterior width)", "farsighter", {"blr.act_width": "posterior"}),
+    # the calibrated targets under the advantage-learning operator, alpha 0.9 (Bellemare et al.
+    # 2016): the gaps between the greedy action and a wasted step widened tenfold, so that the
+    # posterior mean's greedy policy does not repeat a step that changes nothing (DoorKey)
+    Agent("Farsighter (advantage learning 0.9)", "farsighter", {"blr.advantage_learning": 0.9}),
 )
 COLORS = {a.label: f"C{i}" for i, a in enumerate(AGENTS)}
 _NAMED_ONLY = (
@@ -564,6 +568,7 @@ _NAMED_ONLY = (
     "Farsighter (no optimism in place, refit or zero targets, cut delay 3)",
     "Farsighter (posterior width)",
     "Farsighter (refit at switch)",
+    "Farsighter (advantage learning 0.9)",
 )
 DEFAULT_AGENTS = tuple(a.label for a in AGENTS if a.label not in _NAMED_ONLY)
 """The default list: every agent once but those run only when named. "Farsighter (redraw k)" and
