@@ -43,7 +43,9 @@ class Entry:
 
 
 _REFIT_ZERO = "'Farsighter (no optimism in place, refit or zero targets, cut delay 3)'"
-"""The agent of the refit-zero screens (session 40; the default's config since)."""
+"""The agent of the refit-zero screens (session 40's default)."""
+_ADVANTAGE = "'Farsighter (advantage learning 0.9)'"
+"""The agent of the advantage-learning screens (session 41; the default's config since)."""
 
 ENTRIES = (
     Entry(
@@ -661,6 +663,40 @@ ENTRIES = (
             ("frozenlake", "frozenlake", "4", "FrozenLake 4 x 4", 448),
             ("empty", "empty", "5", "MiniGrid Empty-5x5", 987),
             ("deepsea-stochastic", "deepsea-stochastic", "10", "stochastic deep sea N = 10", 88),
+        )
+    ),
+    Entry(
+        "explore/advantage-doorkey5",
+        "explore --families doorkey --sizes 5 --seeds 1 2 3 4 5 --agents Farsighter --workers 2 "
+        "--seeds-per-batch 1",
+        "MiniGrid DoorKey-5x5 with advantage learning after the switch (blr.advantage_learning "
+        "0.9, the default since), 5 seeds, 100k steps; run from a patch of the loss with the "
+        "option's arithmetic, before the field existed (its runs' config.json lack it; seed 1's "
+        "first 20k steps equal the option's run, episode for episode)",
+        1295,
+    ),
+    *(
+        Entry(
+            f"explore/advantage-{name}",
+            f"explore --families {family} --sizes {sizes} --agents {_ADVANTAGE} --workers "
+            f"{workers}",
+            f"the same on {tasks}, 5 seeds",
+            seconds,
+        )
+        for name, family, sizes, workers, tasks, seconds in (
+            ("deepsea", "deepsea", "10 14 20", 2, "deep sea N = 10, 14 and 20", 722),
+            ("chain", "chain", "5 10 30", 2, "the chain L = 5, 10 and 30", 211),
+            ("driftchain", "driftchain", "10 14 20", 2, "the drifting lock L = 10, 14, 20", 432),
+            ("frozenlake", "frozenlake", "4", 1, "FrozenLake 4 x 4", 639),
+            ("empty", "empty", "5", 1, "MiniGrid Empty-5x5", 924),
+            (
+                "deepsea-stochastic",
+                "deepsea-stochastic",
+                "10",
+                1,
+                "stochastic deep sea N = 10",
+                117,
+            ),
         )
     ),
     Entry(

@@ -64,7 +64,7 @@ def test_the_update_and_the_statistics_train_on_the_lowered_targets(tmp_path: Pa
     values = {"preset": "general", "blr.advantage_learning": 0.8, "blr.mode": "incremental"}
     agent, plain = (
         make_agent(tmp_path / "a", **values),
-        make_agent(tmp_path / "p", preset="general"),
+        make_agent(tmp_path / "p", **{"preset": "general", "blr.advantage_learning": 0.0}),
     )
     for loss in (agent.loss, plain.loss):
         loss.torso_target.load_state_dict(agent.loss.torso.state_dict())
@@ -96,9 +96,7 @@ def test_advantage_learning_is_checked() -> None:
                 "farsighter", "CartPole-v1", preset="general", **{"blr.advantage_learning": 1.0}
             )
         )
-    with pytest.raises(ConfigError, match="acts after blr.optimism until-reward's switch"):
-        validate(
-            make_config(
-                "farsighter", "CartPole-v1", preset="cartpole", **{"blr.advantage_learning": 0.5}
-            )
-        )
+    with pytest.raises(ConfigError, match=r"must be in \[0, 1\)"):
+        validate(make_config("farsighter", "CartPole-v1", **{"blr.advantage_learning": -0.1}))
+    # without a switch it never acts, and a run may still carry it (the default's, a flag away)
+    validate(make_config("farsighter", "CartPole-v1", **{"blr.optimism": "always"}))

@@ -288,7 +288,7 @@ def test_agents_are_one_config_each_on_the_auto_preset(tmp_path: Path) -> None:
             "Farsighter (redraw k)",
             "Farsighter (random features)",
             "Farsighter (data weight 100)",
-            "Farsighter (no optimism in place, refit or zero targets, cut delay 3)",
+            "Farsighter (advantage learning 0.9)",
         )
     ]
     assert len({repr(dataclasses.replace(c, run_dir="")) for c in every}) == len(every)
@@ -311,8 +311,10 @@ def test_agents_are_one_config_each_on_the_auto_preset(tmp_path: Path) -> None:
     assert (switch.blr.optimism, switch.blr.calibrated_k_target) == ("until-reward", "cut")
     default = run_config(by["Farsighter"], QUICK, 3, tmp_path, (chain_id(10), 1))
     # session 39's defaults: the default but for the prior where the refit is rejected, the
-    # draw for staying put and the cut at every exploratory action
-    s39 = dataclasses.replace(default.blr, stay_optimism=True, cut_delay=0.0)
+    # draw for staying put, the cut at every exploratory action and no advantage learning
+    s39 = dataclasses.replace(
+        default.blr, stay_optimism=True, cut_delay=0.0, advantage_learning=0.0
+    )
     assert (default.blr.stay_optimism, default.blr.cut_delay) == (False, 3.0)
     # the defaults up to session 36: session 39's but for the targets kept at the switch
     kept = dataclasses.replace(s39, switch_restart="none")
@@ -331,15 +333,24 @@ def test_agents_are_one_config_each_on_the_auto_preset(tmp_path: Path) -> None:
     assert dataclasses.replace(refitted, run_dir="") == dataclasses.replace(
         default, run_dir="", blr=refit
     )
-    # since session 40 the default: the refit, zeroed targets where it is rejected
-    same = run_config(
+    # session 40's default: the refit, zeroed targets where it is rejected, no advantage learning
+    s40 = run_config(
         by["Farsighter (no optimism in place, refit or zero targets, cut delay 3)"],
         QUICK,
         3,
         tmp_path,
         (chain_id(10), 1),
     )
+    no_al = dataclasses.replace(default.blr, advantage_learning=0.0)
+    assert dataclasses.replace(s40, run_dir="") == dataclasses.replace(
+        default, run_dir="", blr=no_al
+    )
+    # since session 41 the default: advantage learning after the switch
+    same = run_config(
+        by["Farsighter (advantage learning 0.9)"], QUICK, 3, tmp_path, (chain_id(10), 1)
+    )
     assert dataclasses.replace(same, run_dir="") == dataclasses.replace(default, run_dir="")
+    assert default.blr.advantage_learning == 0.9
     # the variants of the targets keep them for the whole run, as when their studies were made
     for label in ("Farsighter (mean, k-step target)", "Farsighter (cut)"):
         assert run_config(by[label], QUICK, 3, tmp_path, (chain_id(10), 1)).blr.optimism == "always"

@@ -158,8 +158,9 @@ class BLRConfig:
     grow by 1 / (1 - alpha), the greedy action's value unchanged. Where a wasted step costs
     (1 - gamma) V (a turn, a pick up that changes nothing, a walk into a wall: about 0.01 V at
     gamma = 0.99), a gap below what the values resolve, the posterior mean's greedy policy can
-    repeat such a step to the time limit while the draws, which move, get through. 0: off.
-    Our extension, from the paper's operator."""
+    repeat such a step to the time limit while the draws, which move, get through. 0: off;
+    with ``optimism = always`` there is no switch, so it never acts. The general preset's
+    Farsighter: 0.9 (session 41). Our extension, from the paper's operator."""
     target_noise_scale: float = 1.0
     """With target = sample or sample-greedy: a factor on the draw added to the next state's value
     (1: the posterior's own width). The draw's upward bias (the largest of the actions' draws,
@@ -238,11 +239,6 @@ class BLRConfig:
             (
                 0 <= self.advantage_learning < 1,
                 f"blr.advantage_learning must be in [0, 1) (got {self.advantage_learning})",
-            ),
-            (
-                self.advantage_learning == 0 or self.optimism == "until-reward",
-                "blr.advantage_learning acts after blr.optimism until-reward's switch; with "
-                f"optimism {self.optimism} set it to 0, or set optimism until-reward",
             ),
             (
                 self.target_noise_scale >= 0 and math.isfinite(self.target_noise_scale),

@@ -339,11 +339,16 @@ _KEPT = {"blr.switch_restart": "none"}
 """Pinned by the agents measured when the posterior kept its optimistic targets at the switch
 (the general preset restarts it from its prior since session 37), so that their names still
 say what their results in docs/results are."""
-_S39 = {"blr.switch_restart": "refit", "blr.stay_optimism": True, "blr.cut_delay": 0.0}
+_S39 = {
+    "blr.switch_restart": "refit",
+    "blr.stay_optimism": True,
+    "blr.cut_delay": 0.0,
+    "blr.advantage_learning": 0.0,
+}
 """The general preset's Farsighter of session 39, before the rows kept without their targets
 where the refit is rejected, no draw for staying put and the cut past 3 steps of delay became
-its defaults (session 40): pinned by the agents that vary one of those pieces, so that they
-stay apart from the default."""
+its defaults (session 40), and advantage learning after the switch (session 41): pinned by the
+agents that vary one of those pieces, so that they stay apart from the default."""
 
 AGENTS: tuple[Agent, ...] = (
     Agent("DDQN", "ddqn"),
@@ -515,18 +520,24 @@ AGENTS: tuple[Agent, ...] = (
     # the same with the refit at the switch, the rows kept without their targets where the
     # fit is dropped (blr.switch_restart refit-zero): the found path kept where the fit is
     # sound (deep sea), the rooms' inflated values zeroed where it overestimates (DoorKey); the
-    # default since session 40, the same config as "Farsighter"
+    # default of session 40 (pinned: without advantage learning, the default since session 41)
     Agent(
         "Farsighter (no optimism in place, refit or zero targets, cut delay 3)",
         "farsighter",
-        {"blr.stay_optimism": False, "blr.switch_restart": "refit-zero", "blr.cut_delay": 3.0},
+        {
+            "blr.stay_optimism": False,
+            "blr.switch_restart": "refit-zero",
+            "blr.cut_delay": 3.0,
+            "blr.advantage_learning": 0.0,
+        },
     ),
     # the acting draws at the posterior's own width (the default before the draws were widened
     # to the action gaps, blr.act_width action-gap)
     Agent("Farsighter (posterior width)", "farsighter", {"blr.act_width": "posterior"}),
     # the calibrated targets under the advantage-learning operator, alpha 0.9 (Bellemare et al.
     # 2016): the gaps between the greedy action and a wasted step widened tenfold, so that the
-    # posterior mean's greedy policy does not repeat a step that changes nothing (DoorKey)
+    # posterior mean's greedy policy does not repeat a step that changes nothing (DoorKey); the
+    # default since session 41, the same config as "Farsighter"
     Agent("Farsighter (advantage learning 0.9)", "farsighter", {"blr.advantage_learning": 0.9}),
 )
 COLORS = {a.label: f"C{i}" for i, a in enumerate(AGENTS)}
