@@ -100,3 +100,17 @@ def test_advantage_learning_is_checked() -> None:
         validate(make_config("farsighter", "CartPole-v1", **{"blr.advantage_learning": -0.1}))
     # without a switch it never acts, and a run may still carry it (the default's, a flag away)
     validate(make_config("farsighter", "CartPole-v1", **{"blr.optimism": "always"}))
+
+
+def test_the_switch_makes_the_learner_capture_the_update_again(
+    tmp_path: Path, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    """A captured CUDA graph replays the branches taken at capture, and the calibrated loss
+    branches where its inputs need not show it (mean targets before and after the switch): the
+    switch makes the learner capture again (tests/test_cuda_graph.py checks the updates on a
+    GPU)."""
+    agent = make_agent(tmp_path, **{"preset": "general", "blr.target": "mean", "k_target": "k"})
+    forgotten = []
+    monkeypatch.setattr(agent.learner, "forget_graphs", lambda: forgotten.append(1))
+    agent.calibrate(restart=False)
+    assert forgotten == [1]

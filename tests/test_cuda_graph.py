@@ -248,3 +248,31 @@ def test_a_checkpoint_saved_on_another_device_loads(tmp_path: Path) -> None:
         agent.load_state_dict(gpu_state)
         draws.append(torch.rand(5, generator=agent.gen))
     assert torch.equal(draws[0], draws[1]) and not torch.equal(draws[0], draws[2])
+
+
+@pytest.mark.skipif(not CUDA, reason="needs a CUDA device (run on the GPU benchmark machine)")
+def test_a_graphed_update_takes_advantage_learning_after_the_switch(tmp_path: Path) -> None:
+    """Mean targets before and after until-reward's switch leave the update's inputs alike, so
+    only the recapture at the switch brings advantage learning into a graphed update."""
+    kw = {
+        "preset": "general",
+        "blr__target": "mean",
+        "k_target": "k",
+        "blr__advantage_learning": 0.9,
+        "blr__switch_restart": "none",
+        "target_update_every": 25,
+    }
+    runs = []
+    for setting in ("off", "on"):
+        agent = _agent(tmp_path / setting, "farsighter", device="cuda", cuda_graph=setting, **kw)
+        _feed(agent, 300)
+        for step in range(1, 61):
+            agent.learn(step)
+        agent.calibrate(restart=False)
+        for step in range(61, 121):
+            agent.learn(step)
+        runs.append(agent)
+    eager, graphed = runs
+    assert graphed.learner.step.captures >= 2
+    for a, b in zip(_params(graphed), _params(eager), strict=True):
+        torch.testing.assert_close(a, b, rtol=1e-4, atol=1e-5)

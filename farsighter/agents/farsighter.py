@@ -150,6 +150,7 @@ class FarsighterAgent:
         posterior restarts (``blr.switch_restart``; ``restart = False``: a checkpoint's
         statistics, loaded, are kept). ``on = False``: back to the optimism (rearmed)."""
         self.loss.calibrate(on)
+        self.learner.forget_graphs()  # the calibrated loss branches (blr.advantage_learning)
         self.replay.cut_exploratory = self.loss.k_target == "cut"
         if restart and on:  # a refit reads features trained on the replay, else the prior
             args = (self.replay, self.cfg, self.counters.k, self.device, self.torso)

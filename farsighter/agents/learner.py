@@ -87,6 +87,12 @@ class Learner:
         set_capturable(self.opt, self.graphs)  # a loaded state brings the saver's flags
         reset_step(self.step)  # the optimizer's state tensors are new ones
 
+    def forget_graphs(self) -> None:
+        """Capture the update again at its next calls: the loss changed a branch its inputs do
+        not show (a captured CUDA graph replays the branches taken at capture; eager and
+        compiled steps need nothing)."""
+        reset_step(self.step)
+
 
 class CachedTarget:
     """A target network whose outputs for replay rows are kept until it is copied into.
