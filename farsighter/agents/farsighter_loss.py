@@ -161,8 +161,8 @@ class FarsighterLoss:
         """Targets -> the same under ``blr.advantage_learning`` once calibrated (else as given),
         with the target network's values of the rows' start states."""
         alpha = self.blr.advantage_learning if self.calibrated else 0.0
-        q_BA = lambda: self.torso_target(t.obs_B) @ self.target_mean_AD.T  # noqa: E731
-        return advantage(alpha, q_BA, t.actions_B)
+        phi_BD = self.torso_target(t.obs_B) if alpha else None
+        return advantage(alpha, phi_BD, self.target_mean_AD, t.actions_B)
 
     def draws(
         self,

@@ -21,7 +21,6 @@ from farsighter.agents.farsighter_targets import (
     k_or_one_step,
     one_step_batch,
     one_step_draws,
-    same,
     target_draws,
 )
 from farsighter.agents.learner import make_target_cache
@@ -29,8 +28,8 @@ from farsighter.config import Config
 from farsighter.exploration import ThompsonExploration
 from farsighter.exploration.optimism import calibrated, restart_at_switch, without_staying
 
-Features = torch.Tensor | list[torch.Tensor]
-"""A batch's features of s', (S, B, D), or a list of S (the target caches')."""
+NextFeatures = torch.Tensor | list[torch.Tensor]
+"""Every seed's features of s', (S, B, D), or a list of S (the target caches')."""
 
 
 class SeedParts:
@@ -109,8 +108,8 @@ class SeedParts:
     def targets(
         self,
         mine: Tensors,
-        k_step: tuple[torch.Tensor, Features],
-        one_step: tuple[torch.Tensor, Features] | None,
+        k_step: tuple[torch.Tensor, NextFeatures],
+        one_step: tuple[torch.Tensor, NextFeatures] | None,
         s: int,
         with_one_step: bool,
     ) -> torch.Tensor:
@@ -135,9 +134,5 @@ class SeedParts:
     def advantage(self, phi_target_BD: torch.Tensor | None, actions_B: torch.Tensor) -> Targets:
         """This seed's targets -> the same under ``blr.advantage_learning`` once it is calibrated
         (``FarsighterLoss.advantage``), from the target features of the rows' start states."""
-        if not self.calibrated or phi_target_BD is None:
-            return same
-        phi_BD = phi_target_BD
-        return advantage(
-            self.blr.advantage_learning, lambda: phi_BD @ self.target_mean_AD.T, actions_B
-        )
+        alpha = self.blr.advantage_learning if self.calibrated else 0.0
+        return advantage(alpha, phi_target_BD, self.target_mean_AD, actions_B)

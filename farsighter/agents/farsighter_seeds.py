@@ -30,7 +30,7 @@ from farsighter.agents.common import (
     updates_owed,
 )
 from farsighter.agents.cuda_graph import Tensors
-from farsighter.agents.farsighter_parts import SeedParts
+from farsighter.agents.farsighter_parts import NextFeatures, SeedParts
 from farsighter.agents.farsighter_posterior import (
     accumulate,
     refresh_posterior,
@@ -50,7 +50,7 @@ from farsighter.exploration import optimism
 from farsighter.replay import Batch, VectorStep
 from farsighter.stacked import StackedQNetwork, clip_per_seed
 
-Features = dict[str, tuple[torch.Tensor, torch.Tensor | list[torch.Tensor]]]
+Features = dict[str, tuple[torch.Tensor, NextFeatures]]
 """phi(s') and phi_target(s') of every seed, (S, B, D) each (phi_target a list of S from the
 target caches), of the k-step windows ('') and the one-step windows ('one_') of k_target max."""
 

@@ -158,11 +158,16 @@ def same(y_B: torch.Tensor) -> torch.Tensor:
 
 
 def advantage(
-    alpha: float, q_target_BA: Callable[[], torch.Tensor], actions_B: torch.Tensor
+    alpha: float,
+    phi_target_BD: torch.Tensor | None,
+    target_mean_AD: torch.Tensor,
+    actions_B: torch.Tensor,
 ) -> Targets:
     """Targets -> the same under the advantage-learning operator of ``alpha``
-    (:func:`farsighter.ops.targets.advantage_learning`; as given at 0), with ``q_target_BA()``
-    the target network's values of the rows' start states (computed only where alpha > 0)."""
-    if not alpha:
+    (:func:`farsighter.ops.targets.advantage_learning`), with Q_target(s, .) from the target
+    features ``phi_target_BD`` of the rows' start states and the target mean; as given where
+    alpha is 0 or there are no features."""
+    if not alpha or phi_target_BD is None:
         return same
-    return partial(advantage_learning, q_target_BA=q_target_BA(), actions_B=actions_B, alpha=alpha)
+    q_BA = phi_target_BD @ target_mean_AD.T
+    return partial(advantage_learning, q_target_BA=q_BA, actions_B=actions_B, alpha=alpha)
