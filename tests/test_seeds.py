@@ -140,6 +140,14 @@ def _files(run: Path) -> dict[str, list[str]]:
                 "batch_size": 24,
             },
         ),
+        # a uniformly random action, from each seed's own generator, where its episode is back
+        # at a state it visited (the drifting lock: a wrong move goes one state back), in an
+        # episode after one of that seed's that paid nothing
+        (
+            "farsighter",
+            "farsighter/DriftChain8-v0",
+            {"preset": "general", "blr__revisit_action": "uniform-unpaid", "k": 3},
+        ),
         # windows cut before exploratory actions from the start, where they cost more than two
         # steps of delay (the Chain8 case above cuts at every one)
         (

@@ -117,10 +117,9 @@ class FarsighterAgent:
         with torch.no_grad():
             phi_ED = self.torso(obs_tensor(obs_E, self.device))
             if explore:  # Algorithm 2: Thompson sampling under each environment's draw
-                q_EA = self.exploration.q(phi_ED, obs_E, self.gen)
+                actions_E = self.exploration.actions(phi_ED, obs_E, self.gen)
             else:  # evaluation: greedy under the posterior mean
-                q_EA = phi_ED @ self.head.mean_AD.T
-            actions_E = q_EA.argmax(dim=1)
+                actions_E = (phi_ED @ self.head.mean_AD.T).argmax(dim=1)
             if explore and self.cut:  # the draw chose otherwise than the mean would
                 self.exploratory_E = exploratory_actions(
                     self.head, phi_ED, actions_E, self.cfg.blr.cut_margin, cut_relative(self.cfg)
@@ -142,7 +141,7 @@ class FarsighterAgent:
         )
         if turn is not None:
             self.calibrate(on=turn)
-        self.exploration.observe(done_E)
+        self.exploration.observe(done_E, step.reward_E)
 
     def calibrate(self, restart: bool = True, on: bool = True) -> None:
         """``blr.optimism = until-reward``'s switch (:meth:`FarsighterLoss.calibrate`); the

@@ -116,7 +116,7 @@ class SeedBatchFarsighter:
         with torch.no_grad():
             phi_SED = self.torso(obs_tensor(obs_SE, self.device))
             parts = list(enumerate(self.parts))
-            actions = [p.exploration.q(phi_SED[s], obs_SE[s], p.gen).argmax(1) for s, p in parts]
+            actions = [p.exploration.actions(phi_SED[s], obs_SE[s], p.gen) for s, p in parts]
             if self.records:  # where a seed's draw chose otherwise than its mean would
                 m, rel = self.cfg.blr.cut_margin, optimism.cut_relative(self.cfg)
                 mark = optimism.exploratory_actions
@@ -133,7 +133,7 @@ class SeedBatchFarsighter:
             turn, p.unpaid = optimism.switch_at(self.cfg, p.calibrated, p.unpaid, st.reward_E, done)
             if turn is not None:
                 self.calibrate(s, on=turn)
-            p.exploration.observe(done)
+            p.exploration.observe(done, st.reward_E)
 
     def calibrate(self, s: int, restart: bool = True, on: bool = True) -> None:
         """Seed ``s``'s switch (``FarsighterAgent.calibrate``): its targets, its streams' windows

@@ -52,6 +52,20 @@ class BLRConfig:
     a fixed greedy policy walks; farsighter.exploration.revisit). Our extension, not the paper's."""
     redraw_every: int = 1
     """T for ``redraw=every``."""
+    revisit_action: Literal["draw", "uniform", "uniform-unpaid"] = "draw"
+    """What Thompson acting does at an observation its episode has already visited (compared
+    exactly, as ``redraw = revisit`` does; farsighter.exploration.revisit). draw: the draw's
+    action, as everywhere. uniform: an action uniformly at random. uniform-unpaid: the same in
+    an episode whose environment's previous episode paid no positive reward (so before a run's
+    first positive reward, and after it while its episodes still fail), the draw's action
+    after one that paid. The optimism lifts every value to about its bias / (1 - gamma) before a first
+    reward, and the values then order the actions by more than the draws spread, so a held
+    or narrow draw acts like a fixed policy: a return to a visited state in a deterministic
+    task is a loop that the same draw walks again (MiniGrid DoorKey-6x6: turning left and
+    right in one cell, or a pick up that changes nothing, to the time limit). The random
+    action breaks the loop where a redraw from a narrow posterior repeats it. A task whose
+    observations never repeat within an episode (continuous states, deep sea, the chain) runs
+    as without it, bit for bit. Our extension."""
     target: Literal["mean", "thompson", "sample", "sample-greedy"] = "mean"
     """Value of the next state in the Q-loss target. mean: argmax and value under the posterior
     mean (Eq. 8). thompson: argmax under the latest acting Thompson draw, one weight set for the

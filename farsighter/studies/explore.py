@@ -539,6 +539,16 @@ AGENTS: tuple[Agent, ...] = (
     # posterior mean's greedy policy does not repeat a step that changes nothing (DoorKey); the
     # default since session 41, the same config as "Farsighter"
     Agent("Farsighter (advantage learning 0.9)", "farsighter", {"blr.advantage_learning": 0.9}),
+    # a uniformly random action where the episode is back at an observation it visited: the
+    # loops a held or narrow draw walks before the first reward (DoorKey-6x6) are broken
+    Agent("Farsighter (uniform at revisits)", "farsighter", {"blr.revisit_action": "uniform"}),
+    # the same in an episode after one that paid no positive reward (the draws alone after a
+    # paid one: a run that reaches its goal acts as before)
+    Agent(
+        "Farsighter (uniform at revisits after unpaid episodes)",
+        "farsighter",
+        {"blr.revisit_action": "uniform-unpaid"},
+    ),
 )
 COLORS = {a.label: f"C{i}" for i, a in enumerate(AGENTS)}
 _NAMED_ONLY = (
@@ -580,6 +590,8 @@ _NAMED_ONLY = (
     "Farsighter (posterior width)",
     "Farsighter (refit at switch)",
     "Farsighter (advantage learning 0.9)",
+    "Farsighter (uniform at revisits)",
+    "Farsighter (uniform at revisits after unpaid episodes)",
 )
 DEFAULT_AGENTS = tuple(a.label for a in AGENTS if a.label not in _NAMED_ONLY)
 """The default list: every agent once but those run only when named. "Farsighter (redraw k)" and
