@@ -46,6 +46,10 @@ _REFIT_ZERO = "'Farsighter (no optimism in place, refit or zero targets, cut del
 """The agent of the refit-zero screens (session 40's default)."""
 _ADVANTAGE = "'Farsighter (advantage learning 0.9)'"
 """The agent of the advantage-learning screens (session 41; the default's config since)."""
+_UNIFORM = "'Farsighter (uniform at revisits)'"
+_UNPAID = "'Farsighter (uniform at revisits after unpaid episodes)'"
+"""The agents of the revisit-action screens (session 42; blr.revisit_action uniform and
+uniform-unpaid over the default)."""
 
 ENTRIES = (
     Entry(
@@ -696,6 +700,52 @@ ENTRIES = (
                 1,
                 "stochastic deep sea N = 10",
                 117,
+            ),
+        )
+    ),
+    *(
+        Entry(
+            f"explore/revisit-{rule}-{name}",
+            f"explore --families {family} --sizes {size} {seeds}--agents {agent} {extra}",
+            f"blr.revisit_action {rule} ({label}) on {task}, 5 seeds",
+            seconds,
+        )
+        for rule, agent, label in (
+            ("uniform", _UNIFORM, "a uniform action at every revisit"),
+            ("unpaid", _UNPAID, "a uniform action at a revisit after an unpaid episode"),
+        )
+        for name, family, size, seeds, extra, task, seconds in (
+            (
+                "doorkey6",
+                "doorkey",
+                6,
+                "--seeds 1 2 3 4 5 ",
+                "--steps 80000 "
+                + (
+                    "--workers 2 --seeds-per-batch 3"
+                    if rule == "uniform"
+                    else "--workers 1 --seeds-per-batch 5"
+                ),
+                "MiniGrid DoorKey-6x6 (80k of its 250k steps)",
+                874 if rule == "uniform" else 1268,
+            ),
+            (
+                "empty",
+                "empty",
+                5,
+                "",
+                "--workers 1",
+                "MiniGrid Empty-5x5",
+                743 if rule == "uniform" else 732,
+            ),
+            (
+                "frozenlake",
+                "frozenlake",
+                4,
+                "",
+                "--workers 1",
+                "FrozenLake 4 x 4",
+                508 if rule == "uniform" else 474,
             ),
         )
     ),
