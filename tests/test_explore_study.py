@@ -234,6 +234,8 @@ def test_agents_are_one_config_each_on_the_auto_preset(tmp_path: Path) -> None:
         "Farsighter (no optimism in place, refit or zero targets, cut delay 3)",
         "Farsighter (posterior width)",
         "Farsighter (advantage learning 0.9)",
+        "Farsighter (uniform at revisits)",
+        "Farsighter (uniform at revisits after unpaid episodes)",
     ]
     by = {a.label: a for a in AGENTS}
     # the default list trains no config twice, and leaves out the variants run only when named
@@ -276,10 +278,12 @@ def test_agents_are_one_config_each_on_the_auto_preset(tmp_path: Path) -> None:
         "Farsighter (no optimism in place, refit or zero targets, cut delay 3)",
         "Farsighter (posterior width)",
         "Farsighter (advantage learning 0.9)",
+        "Farsighter (uniform at revisits)",
+        "Farsighter (uniform at revisits after unpaid episodes)",
     }
     assert not named_only & set(StudyConfig().agents)
     assert "Farsighter (redraw step)" in StudyConfig().agents
-    assert len(StudyConfig().agents) == len(AGENTS) - 38
+    assert len(StudyConfig().agents) == len(AGENTS) - 40
     every = [
         run_config(a, QUICK, 3, tmp_path, (chain_id(10), 10_000))
         for a in AGENTS
