@@ -236,6 +236,7 @@ def test_agents_are_one_config_each_on_the_auto_preset(tmp_path: Path) -> None:
         "Farsighter (advantage learning 0.9)",
         "Farsighter (uniform at revisits)",
         "Farsighter (uniform at revisits after unpaid episodes)",
+        "Farsighter (uniform at revisits after time limits)",
     ]
     by = {a.label: a for a in AGENTS}
     # the default list trains no config twice, and leaves out the variants run only when named
@@ -280,10 +281,11 @@ def test_agents_are_one_config_each_on_the_auto_preset(tmp_path: Path) -> None:
         "Farsighter (advantage learning 0.9)",
         "Farsighter (uniform at revisits)",
         "Farsighter (uniform at revisits after unpaid episodes)",
+        "Farsighter (uniform at revisits after time limits)",
     }
     assert not named_only & set(StudyConfig().agents)
     assert "Farsighter (redraw step)" in StudyConfig().agents
-    assert len(StudyConfig().agents) == len(AGENTS) - 40
+    assert len(StudyConfig().agents) == len(AGENTS) - 41
     every = [
         run_config(a, QUICK, 3, tmp_path, (chain_id(10), 10_000))
         for a in AGENTS

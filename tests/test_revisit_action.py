@@ -111,3 +111,22 @@ def test_unpaid_breaks_loops_in_episodes_after_one_that_paid_nothing(tmp_path: P
     assert episode(-1.0) == {greedy}  # after a paid one: the draw's action; pays nothing
     assert len(episode(0.0)) == ACTIONS  # after an unpaid one again
     assert {int(twin.act(obs, 10)[0]) for _ in range(200)} == {greedy}  # resumed: paid before
+
+
+def test_timeout_breaks_loops_in_episodes_after_one_that_ran_to_its_time_limit(
+    tmp_path: Path,
+) -> None:
+    """uniform-timeout: uniform at a revisit in the first episode and in one after an episode
+    that ran to its time limit (truncated), the draw's action after one that ended on its own."""
+    obs = np.full((1, 4), 0.3, np.float32)
+    agent = make_agent(tmp_path, "uniform-timeout")
+    greedy = agent_greedy(agent, obs)
+
+    def episode(truncated: bool) -> set[int]:
+        actions = {int(agent.act(obs, 10)[0]) for _ in range(200)}
+        agent.exploration.observe(np.array([True]), np.array([1.0]), np.array([truncated]))
+        return actions
+
+    assert len(episode(truncated=False)) == ACTIONS  # the first episode; it ends on its own
+    assert episode(truncated=True) == {greedy}  # after one that ended: the draw's action
+    assert len(episode(truncated=False)) == ACTIONS  # after a time limit (paid or not)

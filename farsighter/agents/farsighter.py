@@ -141,7 +141,7 @@ class FarsighterAgent:
         )
         if turn is not None:
             self.calibrate(on=turn)
-        self.exploration.observe(done_E, step.reward_E)
+        self.exploration.observe(done_E, step.reward_E, step.truncated_E)
 
     def calibrate(self, restart: bool = True, on: bool = True) -> None:
         """``blr.optimism = until-reward``'s switch (:meth:`FarsighterLoss.calibrate`); the

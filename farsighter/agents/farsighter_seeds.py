@@ -133,7 +133,7 @@ class SeedBatchFarsighter:
             turn, p.unpaid = optimism.switch_at(self.cfg, p.calibrated, p.unpaid, st.reward_E, done)
             if turn is not None:
                 self.calibrate(s, on=turn)
-            p.exploration.observe(done, st.reward_E)
+            p.exploration.observe(done, st.reward_E, st.truncated_E)
 
     def calibrate(self, s: int, restart: bool = True, on: bool = True) -> None:
         """Seed ``s``'s switch (``FarsighterAgent.calibrate``): its targets, its streams' windows

@@ -52,17 +52,20 @@ class BLRConfig:
     a fixed greedy policy walks; farsighter.exploration.revisit). Our extension, not the paper's."""
     redraw_every: int = 1
     """T for ``redraw=every``."""
-    revisit_action: Literal["draw", "uniform", "uniform-unpaid"] = "draw"
+    revisit_action: Literal["draw", "uniform", "uniform-unpaid", "uniform-timeout"] = "draw"
     """What Thompson acting does at an observation its episode has already visited (compared
     exactly, as ``redraw = revisit`` does; farsighter.exploration.revisit). draw: the draw's
     action, as everywhere. uniform: an action uniformly at random. uniform-unpaid: the same in
     an episode whose environment's previous episode paid no positive reward (so before a run's
     first positive reward, and after it while its episodes still fail), the draw's action
-    after one that paid. The optimism lifts every value to about its bias / (1 - gamma) before a first
-    reward, and the values then order the actions by more than the draws spread, so a held
-    or narrow draw acts like a fixed policy: a return to a visited state in a deterministic
-    task is a loop that the same draw walks again (MiniGrid DoorKey-6x6: turning left and
-    right in one cell, or a pick up that changes nothing, to the time limit). The random
+    after one that paid. uniform-timeout: the same in an episode whose environment's previous
+    episode ran to its time limit (a loop shows as an episode that never ends on its own),
+    the draw's action after one that ended before it. The optimism lifts every value to about
+    its bias / (1 - gamma) before a first reward, and the values then order the actions by
+    more than the draws spread, so a held or narrow draw acts like a fixed policy: a return to
+    a visited state in a deterministic task is a loop that the same draw walks again (MiniGrid
+    DoorKey-6x6: turning left and right in one cell, or a pick up that changes nothing, to the
+    time limit). The random
     action breaks the loop where a redraw from a narrow posterior repeats it. A task whose
     observations never repeat within an episode (continuous states, deep sea, the chain) runs
     as without it, bit for bit. Our extension."""

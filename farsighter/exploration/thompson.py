@@ -13,9 +13,10 @@ environment's current draw w ~ N(mean_a, act_scale^2 cov_scale Cov_a) (``act_sca
 * ``episode``: held for the environment's whole episode;
 * ``revisit`` (:mod:`farsighter.exploration.revisit`): held while the episode reaches new states.
 
-``blr.revisit_action = uniform`` (``uniform-unpaid``: in an episode after one that paid nothing)
-replaces the draw's action by a uniformly random one where the episode is back at an observation
-it visited (:meth:`ThompsonExploration.actions`).
+``blr.revisit_action = uniform`` (``uniform-unpaid``: in an episode after one that paid nothing;
+``uniform-timeout``: after one that ran to its time limit) replaces the draw's action by a
+uniformly random one where the episode is back at an observation it visited
+(:meth:`ThompsonExploration.actions`).
 
 A schedule is a small class with ``due`` (the environments to redraw before this action),
 ``ended`` (episodes that ended) and, when it keeps state, ``state_dict``; adding one is a file
@@ -123,26 +124,29 @@ class ThompsonExploration:
         self.draws = ThompsonDraws(head)  # the draws of a per-step schedule, a block ahead
         self.w_EAD: torch.Tensor | None = None  # the held draws (and the latest acting draw)
         self.redraw_E = np.ones(cfg.num_envs, dtype=bool)
-        # blr.revisit_action: the observations each episode has visited (where it acts), and
-        # (uniform-unpaid) whether each environment's episode so far and its previous one paid
-        self.loops = EpisodeVisits(cfg.num_envs) if cfg.blr.revisit_action != "draw" else None
-        unpaid = cfg.blr.revisit_action == "uniform-unpaid"
-        self.paid_E = np.zeros(cfg.num_envs, dtype=bool) if unpaid else None
-        self.last_paid_E = np.zeros(cfg.num_envs, dtype=bool) if unpaid else None
+        # blr.revisit_action: the observations each episode has visited (where it acts); with
+        # a gate, whether each environment's previous episode ended well (paid, or ended before
+        # its time limit), so that the draw acts at its revisits, and whether this one paid
+        self.revisit_action = cfg.blr.revisit_action
+        self.loops = EpisodeVisits(cfg.num_envs) if self.revisit_action != "draw" else None
+        gated = self.revisit_action in ("uniform-unpaid", "uniform-timeout")
+        self.well_E = np.zeros(cfg.num_envs, dtype=bool) if gated else None
+        self.paid_E = np.zeros(cfg.num_envs, dtype=bool)
 
     def actions(
         self, phi_ED: torch.Tensor, obs_E: np.ndarray, gen: torch.Generator
     ) -> torch.Tensor:
         """Each environment's action: the argmax of Q under its draw (:meth:`q`), and, where
         ``blr.revisit_action`` asks for it (``uniform``; ``uniform-unpaid``: in an episode
-        whose environment's previous episode paid no positive reward), one uniformly at random
-        from ``gen`` where the environment's episode is back at an observation it visited: a
-        draw that led back there would walk the same loop again."""
+        whose environment's previous episode paid no positive reward; ``uniform-timeout``: one
+        whose previous episode ran to its time limit), one uniformly at random from ``gen``
+        where the environment's episode is back at an observation it visited: a draw that led
+        back there would walk the same loop again."""
         actions_E = self.q(phi_ED, obs_E, gen).argmax(dim=1)
         if self.loops is not None:
             again_E = self.loops.visit(obs_E)
-            if self.last_paid_E is not None:
-                again_E &= ~self.last_paid_E
+            if self.well_E is not None:
+                again_E &= ~self.well_E
             if again_E.any():
                 rows = torch.as_tensor(np.flatnonzero(again_E), device=actions_E.device)
                 num_actions = self.head.mean_AD.shape[0]
@@ -174,16 +178,26 @@ class ThompsonExploration:
             self.redraw_E[:] = False
         return _q_under(phi_ED, self.w_EAD)
 
-    def observe(self, done_E: np.ndarray, reward_E: np.ndarray | None = None) -> None:
-        """Episodes that ended at this step (terminated or truncated), and its rewards."""
+    def observe(
+        self,
+        done_E: np.ndarray,
+        reward_E: np.ndarray | None = None,
+        truncated_E: np.ndarray | None = None,
+    ) -> None:
+        """Episodes that ended at this step (terminated or truncated), its rewards, and the
+        episodes it ended at their time limit."""
         if self.schedule is not None:
             self.redraw_E |= self.schedule.ended(done_E)
         if self.loops is not None:
             self.loops.end(done_E)
-        if self.paid_E is not None and self.last_paid_E is not None and reward_E is not None:
+        if self.well_E is None:
+            return
+        if self.revisit_action == "uniform-unpaid" and reward_E is not None:
             self.paid_E |= np.asarray(reward_E) > 0
-            self.last_paid_E[done_E] = self.paid_E[done_E]
+            self.well_E[done_E] = self.paid_E[done_E]
             self.paid_E[done_E] = False
+        elif self.revisit_action == "uniform-timeout" and truncated_E is not None:
+            self.well_E[done_E] = ~np.asarray(truncated_E, dtype=bool)[done_E]
 
     def acting_draw(self, gen: torch.Generator) -> torch.Tensor:
         """The weights (A, D) of the latest acting draw (environment 0), for blr.target =
@@ -202,9 +216,7 @@ class ThompsonExploration:
             "redraw_E": self.redraw_E.copy(),
             "visits": None if self.schedule is None else self.schedule.state_dict(),
             "loops": None if self.loops is None else self.loops.state_dict(),
-            "paid": None
-            if self.paid_E is None or self.last_paid_E is None
-            else (self.paid_E.copy(), self.last_paid_E.copy()),
+            "ended_well": None if self.well_E is None else (self.paid_E.copy(), self.well_E.copy()),
         }
 
     def load_state_dict(self, state: dict[str, Any]) -> None:
@@ -219,9 +231,10 @@ class ThompsonExploration:
             self.schedule.load_state_dict(state.get("visits"))
         if self.loops is not None:
             self.loops.load_state_dict(state.get("loops"))
-        if self.paid_E is not None and state.get("paid") is not None:
-            paid, last = state["paid"]
-            self.paid_E, self.last_paid_E = np.array(paid, bool), np.array(last, bool)
+        ended_well = state.get("ended_well", state.get("paid"))  # (its name before)
+        if self.well_E is not None and ended_well is not None:
+            paid, well = ended_well
+            self.paid_E, self.well_E = np.array(paid, bool), np.array(well, bool)
 
 
 def _q_under(phi_ED: torch.Tensor, w_EAD: torch.Tensor) -> torch.Tensor:

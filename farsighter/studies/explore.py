@@ -549,6 +549,13 @@ AGENTS: tuple[Agent, ...] = (
         "farsighter",
         {"blr.revisit_action": "uniform-unpaid"},
     ),
+    # the same in an episode after one that ran to its time limit (a loop never ends an
+    # episode; a fall into a hole or a goal does)
+    Agent(
+        "Farsighter (uniform at revisits after time limits)",
+        "farsighter",
+        {"blr.revisit_action": "uniform-timeout"},
+    ),
 )
 COLORS = {a.label: f"C{i}" for i, a in enumerate(AGENTS)}
 _NAMED_ONLY = (
@@ -592,6 +599,7 @@ _NAMED_ONLY = (
     "Farsighter (advantage learning 0.9)",
     "Farsighter (uniform at revisits)",
     "Farsighter (uniform at revisits after unpaid episodes)",
+    "Farsighter (uniform at revisits after time limits)",
 )
 DEFAULT_AGENTS = tuple(a.label for a in AGENTS if a.label not in _NAMED_ONLY)
 """The default list: every agent once but those run only when named. "Farsighter (redraw k)" and
