@@ -46,10 +46,26 @@ _REFIT_ZERO = "'Farsighter (no optimism in place, refit or zero targets, cut del
 """The agent of the refit-zero screens (session 40's default)."""
 _ADVANTAGE = "'Farsighter (advantage learning 0.9)'"
 """The agent of the advantage-learning screens (session 41; the default's config since)."""
-_UNIFORM = "'Farsighter (uniform at revisits)'"
-_UNPAID = "'Farsighter (uniform at revisits after unpaid episodes)'"
-"""The agents of the revisit-action screens (session 42; blr.revisit_action uniform and
-uniform-unpaid over the default)."""
+_REVISIT = {
+    "uniform": (
+        "'Farsighter (uniform at revisits)'",
+        "uniform (a uniform action at every revisit)",
+    ),
+    "unpaid": (
+        "'Farsighter (uniform at revisits after unpaid episodes)'",
+        "uniform-unpaid (a uniform action at a revisit after an episode that paid nothing)",
+    ),
+    "timeout": (
+        "'Farsighter (uniform at revisits after time limits)'",
+        "uniform-timeout (a uniform action at a revisit after an episode that ran to its time "
+        "limit)",
+    ),
+}
+"""The agents of the revisit-action screens (session 42) and what each rule does."""
+_DK6 = "--seeds 1 2 3 4 5 "
+_DK6_TASK = "MiniGrid DoorKey-6x6 (80k of its 250k steps)"
+_DK6_UNIFORM = "--steps 80000 --workers 2 --seeds-per-batch 3"
+_DK6_UNPAID = "--steps 80000 --workers 1 --seeds-per-batch 5"
 
 ENTRIES = (
     Entry(
@@ -706,46 +722,28 @@ ENTRIES = (
     *(
         Entry(
             f"explore/revisit-{rule}-{name}",
-            f"explore --families {family} --sizes {size} {seeds}--agents {agent} {extra}",
-            f"blr.revisit_action {rule} ({label}) on {task}, 5 seeds",
+            f"explore --families {family} --sizes {size} {seeds}--agents {_REVISIT[rule][0]} "
+            f"{extra}",
+            f"blr.revisit_action {_REVISIT[rule][1]} on {task}, 5 seeds",
             seconds,
         )
-        for rule, agent, label in (
-            ("uniform", _UNIFORM, "a uniform action at every revisit"),
-            ("unpaid", _UNPAID, "a uniform action at a revisit after an unpaid episode"),
-        )
-        for name, family, size, seeds, extra, task, seconds in (
+        for rule, name, family, size, seeds, extra, task, seconds in (
+            ("uniform", "doorkey6", "doorkey", 6, _DK6, _DK6_UNIFORM, _DK6_TASK, 874),
+            ("unpaid", "doorkey6", "doorkey", 6, _DK6, _DK6_UNPAID, _DK6_TASK, 1268),
+            ("uniform", "empty", "empty", 5, "", "--workers 1", "MiniGrid Empty-5x5", 743),
+            ("unpaid", "empty", "empty", 5, "", "--workers 1", "MiniGrid Empty-5x5", 732),
+            ("uniform", "frozenlake", "frozenlake", 4, "", "--workers 1", "FrozenLake 4 x 4", 508),
+            ("unpaid", "frozenlake", "frozenlake", 4, "", "--workers 1", "FrozenLake 4 x 4", 474),
+            ("timeout", "frozenlake", "frozenlake", 4, "", "--workers 1", "FrozenLake 4 x 4", 460),
             (
-                "doorkey6",
-                "doorkey",
-                6,
-                "--seeds 1 2 3 4 5 ",
-                "--steps 80000 "
-                + (
-                    "--workers 2 --seeds-per-batch 3"
-                    if rule == "uniform"
-                    else "--workers 1 --seeds-per-batch 5"
-                ),
-                "MiniGrid DoorKey-6x6 (80k of its 250k steps)",
-                874 if rule == "uniform" else 1268,
-            ),
-            (
-                "empty",
-                "empty",
-                5,
+                "unpaid",
+                "driftchain",
+                "driftchain",
+                "10 14 20",
                 "",
                 "--workers 1",
-                "MiniGrid Empty-5x5",
-                743 if rule == "uniform" else 732,
-            ),
-            (
-                "frozenlake",
-                "frozenlake",
-                4,
-                "",
-                "--workers 1",
-                "FrozenLake 4 x 4",
-                508 if rule == "uniform" else 474,
+                "the drifting lock L = 10, 14 and 20",
+                867,
             ),
         )
     ),
