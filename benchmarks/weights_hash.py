@@ -117,6 +117,10 @@ RUNS: dict[str, tuple[str, str, int, dict[str, Any]]] = {
     # ... and where a step can leave the agent where it was (FrozenLake's walls): no draw in a
     # target whose window ends where it began (blr.stay_optimism False, session 40)
     "farsighter-general-frozenlake": ("farsighter", "FrozenLake-v1", 3_000, GENERAL),
+    # ... and where an episode after one that ran to its time limit comes back to a state (the
+    # drifting lock: a wrong move goes one state back): a uniform action there
+    # (blr.revisit_action uniform-timeout, session 42)
+    "farsighter-general-driftchain": ("farsighter", "farsighter/DriftChain8-v0", 3_000, GENERAL),
 }
 
 

@@ -736,6 +736,16 @@ ENTRIES = (
             ("unpaid", "frozenlake", "frozenlake", 4, "", "--workers 1", "FrozenLake 4 x 4", 474),
             ("timeout", "frozenlake", "frozenlake", 4, "", "--workers 1", "FrozenLake 4 x 4", 460),
             (
+                "timeout",
+                "doorkey5",
+                "doorkey",
+                5,
+                _DK6,
+                "--workers 2 --seeds-per-batch 1",
+                "MiniGrid DoorKey-5x5 (100k steps)",
+                1104,
+            ),
+            (
                 "unpaid",
                 "driftchain",
                 "driftchain",

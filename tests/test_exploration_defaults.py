@@ -639,6 +639,7 @@ def test_auto_gives_discrete_tasks_the_general_preset_and_keeps_table_1_selectab
     assert (defaults.blr.stay_optimism, bdqn.blr.stay_optimism) == (False, True)
     assert (defaults.blr.cut_delay, bdqn.blr.cut_delay) == (3.0, 0.0)
     assert (defaults.blr.advantage_learning, bdqn.blr.advantage_learning) == (0.9, 0.0)
+    assert (defaults.blr.revisit_action, bdqn.blr.revisit_action) == ("uniform-timeout", "draw")
     control = make_config("farsighter", "CartPole-v1", preset="control")
     assert (control.blr.switch_restart, control.blr.optimism) == ("none", "always")
     assert make_config("farsighter", "CartPole-v1", preset="control").blr.act_width == "posterior"

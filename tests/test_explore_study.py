@@ -294,7 +294,7 @@ def test_agents_are_one_config_each_on_the_auto_preset(tmp_path: Path) -> None:
             "Farsighter (redraw k)",
             "Farsighter (random features)",
             "Farsighter (data weight 100)",
-            "Farsighter (advantage learning 0.9)",
+            "Farsighter (uniform at revisits after time limits)",
         )
     ]
     assert len({repr(dataclasses.replace(c, run_dir="")) for c in every}) == len(every)
@@ -317,9 +317,14 @@ def test_agents_are_one_config_each_on_the_auto_preset(tmp_path: Path) -> None:
     assert (switch.blr.optimism, switch.blr.calibrated_k_target) == ("until-reward", "cut")
     default = run_config(by["Farsighter"], QUICK, 3, tmp_path, (chain_id(10), 1))
     # session 39's defaults: the default but for the prior where the refit is rejected, the
-    # draw for staying put, the cut at every exploratory action and no advantage learning
+    # draw for staying put, the cut at every exploratory action, no advantage learning and the
+    # draw's action at every revisit
     s39 = dataclasses.replace(
-        default.blr, stay_optimism=True, cut_delay=0.0, advantage_learning=0.0
+        default.blr,
+        stay_optimism=True,
+        cut_delay=0.0,
+        advantage_learning=0.0,
+        revisit_action="draw",
     )
     assert (default.blr.stay_optimism, default.blr.cut_delay) == (False, 3.0)
     # the defaults up to session 36: session 39's but for the targets kept at the switch
@@ -347,16 +352,29 @@ def test_agents_are_one_config_each_on_the_auto_preset(tmp_path: Path) -> None:
         tmp_path,
         (chain_id(10), 1),
     )
-    no_al = dataclasses.replace(default.blr, advantage_learning=0.0)
+    no_al = dataclasses.replace(default.blr, advantage_learning=0.0, revisit_action="draw")
     assert dataclasses.replace(s40, run_dir="") == dataclasses.replace(
         default, run_dir="", blr=no_al
     )
-    # since session 41 the default: advantage learning after the switch
-    same = run_config(
+    # session 41's default: advantage learning after the switch, the draw's action at revisits
+    s41 = run_config(
         by["Farsighter (advantage learning 0.9)"], QUICK, 3, tmp_path, (chain_id(10), 1)
     )
-    assert dataclasses.replace(same, run_dir="") == dataclasses.replace(default, run_dir="")
+    drawn = dataclasses.replace(default.blr, revisit_action="draw")
+    assert dataclasses.replace(s41, run_dir="") == dataclasses.replace(
+        default, run_dir="", blr=drawn
+    )
     assert default.blr.advantage_learning == 0.9
+    # since session 42 the default: a uniform action at a revisit after a time limit
+    same = run_config(
+        by["Farsighter (uniform at revisits after time limits)"],
+        QUICK,
+        3,
+        tmp_path,
+        (chain_id(10), 1),
+    )
+    assert dataclasses.replace(same, run_dir="") == dataclasses.replace(default, run_dir="")
+    assert default.blr.revisit_action == "uniform-timeout"
     # the variants of the targets keep them for the whole run, as when their studies were made
     for label in ("Farsighter (mean, k-step target)", "Farsighter (cut)"):
         assert run_config(by[label], QUICK, 3, tmp_path, (chain_id(10), 1)).blr.optimism == "always"

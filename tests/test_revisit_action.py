@@ -116,8 +116,9 @@ def test_unpaid_breaks_loops_in_episodes_after_one_that_paid_nothing(tmp_path: P
 def test_timeout_breaks_loops_in_episodes_after_one_that_ran_to_its_time_limit(
     tmp_path: Path,
 ) -> None:
-    """uniform-timeout: uniform at a revisit in the first episode and in one after an episode
-    that ran to its time limit (truncated), the draw's action after one that ended on its own."""
+    """uniform-timeout: uniform at a revisit in an episode after one that ran to its time limit
+    (truncated), the draw's action after one that ended on its own and in the first episode (a
+    task without a time limit, CliffWalking-v1, may never end it)."""
     obs = np.full((1, 4), 0.3, np.float32)
     agent = make_agent(tmp_path, "uniform-timeout")
     greedy = agent_greedy(agent, obs)
@@ -127,6 +128,6 @@ def test_timeout_breaks_loops_in_episodes_after_one_that_ran_to_its_time_limit(
         agent.exploration.observe(np.array([True]), np.array([1.0]), np.array([truncated]))
         return actions
 
-    assert len(episode(truncated=False)) == ACTIONS  # the first episode; it ends on its own
-    assert episode(truncated=True) == {greedy}  # after one that ended: the draw's action
+    assert episode(truncated=True) == {greedy}  # the first episode: the draw's action
     assert len(episode(truncated=False)) == ACTIONS  # after a time limit (paid or not)
+    assert episode(truncated=False) == {greedy}  # after one that ended on its own

@@ -68,7 +68,8 @@ class BLRConfig:
     time limit). The random
     action breaks the loop where a redraw from a narrow posterior repeats it. A task whose
     observations never repeat within an episode (continuous states, deep sea, the chain) runs
-    as without it, bit for bit. Our extension."""
+    as without it, bit for bit. The general preset's Farsighter: uniform-timeout (session 42).
+    Our extension."""
     target: Literal["mean", "thompson", "sample", "sample-greedy"] = "mean"
     """Value of the next state in the Q-loss target. mean: argmax and value under the posterior
     mean (Eq. 8). thompson: argmax under the latest acting Thompson draw, one weight set for the

@@ -129,8 +129,11 @@ class ThompsonExploration:
         # its time limit), so that the draw acts at its revisits, and whether this one paid
         self.revisit_action = cfg.blr.revisit_action
         self.loops = EpisodeVisits(cfg.num_envs) if self.revisit_action != "draw" else None
+        # (the first episode: uniform-unpaid breaks loops there, uniform-timeout does not, as
+        # nothing ran to a time limit yet; a task without one may never end its first episode)
         gated = self.revisit_action in ("uniform-unpaid", "uniform-timeout")
-        self.well_E = np.zeros(cfg.num_envs, dtype=bool) if gated else None
+        first = self.revisit_action == "uniform-timeout"
+        self.well_E = np.full(cfg.num_envs, first) if gated else None
         self.paid_E = np.zeros(cfg.num_envs, dtype=bool)
 
     def actions(

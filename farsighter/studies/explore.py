@@ -344,6 +344,7 @@ _S39 = {
     "blr.stay_optimism": True,
     "blr.cut_delay": 0.0,
     "blr.advantage_learning": 0.0,
+    "blr.revisit_action": "draw",
 }
 """The general preset's Farsighter of session 39, before the rows kept without their targets
 where the refit is rejected, no draw for staying put and the cut past 3 steps of delay became
@@ -529,6 +530,7 @@ AGENTS: tuple[Agent, ...] = (
             "blr.switch_restart": "refit-zero",
             "blr.cut_delay": 3.0,
             "blr.advantage_learning": 0.0,
+            "blr.revisit_action": "draw",
         },
     ),
     # the acting draws at the posterior's own width (the default before the draws were widened
@@ -537,8 +539,12 @@ AGENTS: tuple[Agent, ...] = (
     # the calibrated targets under the advantage-learning operator, alpha 0.9 (Bellemare et al.
     # 2016): the gaps between the greedy action and a wasted step widened tenfold, so that the
     # posterior mean's greedy policy does not repeat a step that changes nothing (DoorKey); the
-    # default since session 41, the same config as "Farsighter"
-    Agent("Farsighter (advantage learning 0.9)", "farsighter", {"blr.advantage_learning": 0.9}),
+    # default since session 41 (session 41's default: the draw's action at every revisit)
+    Agent(
+        "Farsighter (advantage learning 0.9)",
+        "farsighter",
+        {"blr.advantage_learning": 0.9, "blr.revisit_action": "draw"},
+    ),
     # a uniformly random action where the episode is back at an observation it visited: the
     # loops a held or narrow draw walks before the first reward (DoorKey-6x6) are broken
     Agent("Farsighter (uniform at revisits)", "farsighter", {"blr.revisit_action": "uniform"}),
@@ -550,7 +556,8 @@ AGENTS: tuple[Agent, ...] = (
         {"blr.revisit_action": "uniform-unpaid"},
     ),
     # the same in an episode after one that ran to its time limit (a loop never ends an
-    # episode; a fall into a hole or a goal does)
+    # episode; a fall into a hole or a goal does); the default since session 42, the same
+    # config as "Farsighter"
     Agent(
         "Farsighter (uniform at revisits after time limits)",
         "farsighter",
