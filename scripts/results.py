@@ -62,7 +62,7 @@ _REVISIT = {
     ),
 }
 """The agents of the revisit-action screens (session 42) and what each rule does."""
-_DK6 = "--seeds 1 2 3 4 5 "
+_SEEDS5 = "--seeds 1 2 3 4 5 "
 _DK6_TASK = "MiniGrid DoorKey-6x6 (80k of its 250k steps)"
 _DK6_UNIFORM = "--steps 80000 --workers 2 --seeds-per-batch 3"
 _DK6_UNPAID = "--steps 80000 --workers 1 --seeds-per-batch 5"
@@ -728,8 +728,8 @@ ENTRIES = (
             seconds,
         )
         for rule, name, family, size, seeds, extra, task, seconds in (
-            ("uniform", "doorkey6", "doorkey", 6, _DK6, _DK6_UNIFORM, _DK6_TASK, 874),
-            ("unpaid", "doorkey6", "doorkey", 6, _DK6, _DK6_UNPAID, _DK6_TASK, 1268),
+            ("uniform", "doorkey6", "doorkey", 6, _SEEDS5, _DK6_UNIFORM, _DK6_TASK, 874),
+            ("unpaid", "doorkey6", "doorkey", 6, _SEEDS5, _DK6_UNPAID, _DK6_TASK, 1268),
             ("uniform", "empty", "empty", 5, "", "--workers 1", "MiniGrid Empty-5x5", 743),
             ("unpaid", "empty", "empty", 5, "", "--workers 1", "MiniGrid Empty-5x5", 732),
             ("uniform", "frozenlake", "frozenlake", 4, "", "--workers 1", "FrozenLake 4 x 4", 508),
@@ -740,7 +740,7 @@ ENTRIES = (
                 "doorkey5",
                 "doorkey",
                 5,
-                _DK6,
+                _SEEDS5,
                 "--workers 2 --seeds-per-batch 1",
                 "MiniGrid DoorKey-5x5 (100k steps)",
                 1104,

@@ -65,11 +65,10 @@ class BLRConfig:
     more than the draws spread, so a held or narrow draw acts like a fixed policy: a return to
     a visited state in a deterministic task is a loop that the same draw walks again (MiniGrid
     DoorKey-6x6: turning left and right in one cell, or a pick up that changes nothing, to the
-    time limit). The random
-    action breaks the loop where a redraw from a narrow posterior repeats it. A task whose
-    observations never repeat within an episode (continuous states, deep sea, the chain) runs
-    as without it, bit for bit. The general preset's Farsighter: uniform-timeout (session 42).
-    Our extension."""
+    time limit). The random action breaks the loop where a redraw from a narrow posterior
+    repeats it. A task whose observations never repeat within an episode (continuous states,
+    deep sea, the chain) runs as without it, bit for bit. The general preset's Farsighter:
+    uniform-timeout (session 42). Our extension."""
     target: Literal["mean", "thompson", "sample", "sample-greedy"] = "mean"
     """Value of the next state in the Q-loss target. mean: argmax and value under the posterior
     mean (Eq. 8). thompson: argmax under the latest acting Thompson draw, one weight set for the

@@ -146,10 +146,13 @@ class ThompsonExploration:
         where the environment's episode is back at an observation it visited: a draw that led
         back there would walk the same loop again."""
         actions_E = self.q(phi_ED, obs_E, gen).argmax(dim=1)
-        if self.loops is not None:
+        # (an episode whose gate is shut stays so until it ends, which forgets its visits: none
+        # need recording while every environment's is)
+        open_E = None if self.well_E is None else ~self.well_E
+        if self.loops is not None and (open_E is None or open_E.any()):
             again_E = self.loops.visit(obs_E)
-            if self.well_E is not None:
-                again_E &= ~self.well_E
+            if open_E is not None:
+                again_E &= open_E
             if again_E.any():
                 rows = torch.as_tensor(np.flatnonzero(again_E), device=actions_E.device)
                 num_actions = self.head.mean_AD.shape[0]
