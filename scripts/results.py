@@ -758,6 +758,13 @@ ENTRIES = (
         )
     ),
     Entry(
+        "explore/doorkey8-s43",
+        "explore --families doorkey --sizes 8 --agents Farsighter --seeds 1 2 3 4 5 --steps 500000 "
+        "--workers 2 --seeds-per-batch 1",
+        "the default on MiniGrid DoorKey-8x8, 500k of its 1M steps, 5 seeds",
+        5418,
+    ),
+    Entry(
         "minatar",
         "atari --games minatar --agents DDQN BDQN Farsighter --seeds 1 2 --steps 50000 "
         "--eval-every 10000 --eval-episodes 10",
