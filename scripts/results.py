@@ -765,6 +765,13 @@ ENTRIES = (
         5418,
     ),
     Entry(
+        "explore/keycorridor1-s43",
+        "explore --families keycorridor --sizes 1 --agents DDQN Farsighter --seeds 1 2 3 "
+        "--workers 1 --seeds-per-batch 1",
+        "DDQN and the default on MiniGrid KeyCorridorS3R1 (100k steps), 3 seeds",
+        1258,
+    ),
+    Entry(
         "minatar",
         "atari --games minatar --agents DDQN BDQN Farsighter --seeds 1 2 --steps 50000 "
         "--eval-every 10000 --eval-episodes 10",
