@@ -772,6 +772,13 @@ ENTRIES = (
         1258,
     ),
     Entry(
+        "explore/multiroom2-s43",
+        "explore --families multiroom --sizes 2 --agents DDQN Farsighter --seeds 1 2 3 "
+        "--workers 1 --seeds-per-batch 1",
+        "DDQN and the default on MiniGrid MultiRoom-N2-S4 (100k steps), 3 seeds",
+        1297,
+    ),
+    Entry(
         "minatar",
         "atari --games minatar --agents DDQN BDQN Farsighter --seeds 1 2 --steps 50000 "
         "--eval-every 10000 --eval-episodes 10",
