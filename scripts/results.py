@@ -779,6 +779,12 @@ ENTRIES = (
         1297,
     ),
     Entry(
+        "explore/deepsea-growth-ddqn-s43",
+        "explore --families deepsea --agents DDQN --seeds 1 2 3 4 5 --workers 2 --seeds-per-batch 3",
+        "DDQN on deep sea at every size, N = 6 to 30, 5 seeds: its growth (issue #25 item 4)",
+        676,
+    ),
+    Entry(
         "minatar",
         "atari --games minatar --agents DDQN BDQN Farsighter --seeds 1 2 --steps 50000 "
         "--eval-every 10000 --eval-episodes 10",
