@@ -785,6 +785,14 @@ ENTRIES = (
         676,
     ),
     Entry(
+        "explore/deepsea-growth-s44",
+        "explore --families deepsea --agents DDQN Farsighter --seeds 1 2 3 4 5 --workers 2",
+        "deep sea at every size, N = 6 to 30, DDQN and the defaults in one study, 5 seeds: "
+        "both growths and the claim between them (issue #25 item 4; DDQN's runs are those of "
+        "explore/deepsea-growth-ddqn-s43, copied in and kept as finished, 676 s of the time)",
+        3380,
+    ),
+    Entry(
         "minatar",
         "atari --games minatar --agents DDQN BDQN Farsighter --seeds 1 2 --steps 50000 "
         "--eval-every 10000 --eval-episodes 10",
