@@ -92,3 +92,39 @@ def test_compiled_agents_of_other_shapes_in_one_process(tmp_path: Path) -> None:
         eager, eager_losses = _run(tmp_path / f"e{i}", "ddqn", False, **extra)
         comp, comp_losses = _run(tmp_path / f"c{i}", "ddqn", True, **extra)
         np.testing.assert_allclose(comp_losses, eager_losses, rtol=1e-4, atol=1e-6)
+
+
+def test_a_compiled_farsighter_follows_its_switch(tmp_path: Path) -> None:
+    """``blr.optimism until-reward`` (the general preset's) changes the loss's branch mid-run: a
+    compiled step (never a CUDA graph) compiles the new branch, and its updates on both sides of
+    the switch still equal the eager agent's (the optimistic targets, then the calibrated ones)."""
+
+    def run(sub: str, compiled: bool) -> tuple[Any, list[float]]:
+        agent = _agent(
+            tmp_path / sub,
+            "farsighter",
+            compile=compiled,
+            target_update_every=25,
+            blr__posterior_every=40,
+            blr__optimism="until-reward",
+            blr__target="sample",
+            k_target="max",
+        )
+        _feed(agent, 300)  # its rewards are positive: the switch happens here
+        assert agent.loss.calibrated
+        losses = []
+        for step in range(1, 121):
+            if step == 61:
+                agent.calibrate(on=False)  # the optimism again: the other branch
+            m = agent.learn(step)
+            if "td_loss" in m:
+                losses.append(float(m["td_loss"]))
+        return agent, losses
+
+    eager, eager_losses = run("eager", False)
+    comp, comp_losses = run("compiled", True)
+    assert hasattr(comp.learner.step, "_torchdynamo_orig_callable") and not comp.learner.graphs
+    assert not comp.loss.calibrated and len(comp_losses) == len(eager_losses) > 40
+    np.testing.assert_allclose(comp_losses, eager_losses, rtol=1e-4, atol=1e-6)
+    for a, b in zip(_params(comp), _params(eager), strict=True):
+        torch.testing.assert_close(a, b, rtol=1e-4, atol=1e-5)

@@ -150,3 +150,16 @@ def test_one_hot_rows_gives_each_rows_column() -> None:
     index, value = hot
     assert torch.equal(value, x.sum(1))
     assert torch.equal(index[3:], x[3:].argmax(1))
+
+
+def test_a_compiled_network_takes_no_gather() -> None:
+    """Inside a step being compiled the one-hot check (which reads values) is not made, so a
+    network over one-hot rows compiles as one graph, with F.linear's values."""
+    g = torch.Generator().manual_seed(0)
+    x = one_hot(256, 400, g)
+    net = RandomFeatureTorso(MLPTorso(400, (64,)), 400, 512)
+    assert worth_gathering(x, net.rf_weight)  # eager: the gather (the test above)
+    with torch.no_grad():
+        eager = net(x)
+        compiled = torch.compile(net, fullgraph=True, dynamic=False)(x)
+    torch.testing.assert_close(compiled, eager, rtol=1e-5, atol=1e-5)

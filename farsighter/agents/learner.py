@@ -54,14 +54,19 @@ class Learner:
         optimizer: torch.optim.Optimizer | None = None,
         max_grad_norm: float | None = None,
         eager: bool = False,
+        capture: bool = True,
     ) -> None:
         self.loss = loss
         self.params = list(params)
         self.opt = optimizer if optimizer is not None else make_optimizer(self.params, cfg)
         self.max_grad_norm = cfg.max_grad_norm if max_grad_norm is None else max_grad_norm
-        # eager: a loss that reads the host (never captured or compiled, whatever the config)
-        self.graphs = not eager and graphs_enabled(
-            cfg.runtime.cuda_graph, device, not cfg.runtime.compile
+        # eager: a loss that reads the host (never captured or compiled, whatever the config);
+        # capture False: a loss that switches its branch mid-run is compiled where asked
+        # (torch.compile guards on the branch and compiles the new one) but never captured
+        self.graphs = (
+            not eager
+            and capture
+            and graphs_enabled(cfg.runtime.cuda_graph, device, not cfg.runtime.compile)
         )
         set_capturable(self.opt, self.graphs)
         self.step = wrap_step(self._update, self.graphs, cfg.runtime.compile and not eager)

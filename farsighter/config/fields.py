@@ -91,8 +91,8 @@ class BLRConfig:
     a task whose reward ends it (a MiniGrid goal, FrozenLake) makes reaching the reward the
     worst action (docs/design.md, the plainest MiniGrid room). Before the switch a run is the
     run without it, bit for bit. The switch is part of the checkpoint; each seed of a seed
-    batch switches on its own; a run with it updates eagerly (no CUDA graph, no compile). Our
-    extension."""
+    batch switches on its own; a run with it is never captured as a CUDA graph (with
+    ``runtime.compile`` its step compiles, and compiles again at the switch). Our extension."""
     calibrated_k_target: Literal["k", "cut"] = "k"
     """With ``optimism = until-reward`` (or ``Config.k_target = cut``): the k-step target after
     the switch. k: the plain k-step return, which follows the behaviour, so a lock whose path

@@ -25,9 +25,12 @@ MIN_WORK = 1 << 16
 
 def worth_gathering(x: torch.Tensor, weight: torch.Tensor) -> bool:
     """Whether ``x`` (..., in) through ``weight`` (..., out, in) may take the gather: float32 on
-    CPU outside autocast, with enough work (:data:`MIN_WORK`) to pay for the check."""
+    CPU outside autocast, with enough work (:data:`MIN_WORK`) to pay for the check, and not
+    inside a step being compiled (its checks read values, which would break the compiled graph
+    in pieces; Inductor makes the product its own kernel there)."""
     return (
-        x.device.type == "cpu"
+        not torch.compiler.is_compiling()
+        and x.device.type == "cpu"
         and x.dtype == torch.float32
         and weight.dtype == torch.float32
         and not torch.is_autocast_enabled("cpu")
