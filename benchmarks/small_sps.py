@@ -16,8 +16,14 @@ the first step at or after ``learning_starts`` to the last step, before the fina
 a ``farsighter train`` process with those settings as flags. Each round runs every entry once in
 turn, so the ratios are taken side by side. ``--baseline DIR`` also measures the package of
 another checkout (a git worktree of an older commit) the same way, for before/after ratios.
+``--compile`` also measures each algorithm with ``--compile`` (``RuntimeConfig.compile``: the
+update step through ``torch.compile``), as ``<algo>+compile``. The compile happens at the first
+update, which falls before the window opens (the window starts after the step at
+``learning_starts`` and its update, as CleanRL's first ``SPS:`` line comes after its first
+update): the run's overall steps/s, which pays it, is each row's ``library_overall_sps``.
 
     python -m benchmarks.small_sps --cleanrl DIR [--baseline DIR] [--algos ddqn farsighter] [--rounds 2]
+        [--compile]
 
 ``--cleanrl DIR``: a CleanRL checkout holding ``cleanrl/dqn.py`` and ``cleanrl_utils/``, run
 unmodified through :func:`benchmarks.atari_sps.cleanrl_launch` (Gymnasium 1.x adapted to the 0.29
@@ -75,7 +81,7 @@ def train_command(spec: dict[str, Any], run_dir: str) -> list[str]:
         "eval_episodes": 1,
         "run_dir": run_dir,
     }
-    cmd = ["-m", "farsighter", "train"]
+    cmd = ["-m", "farsighter", "train"] + (["--compile"] if spec.get("compile") else [])
     for key, value in flags.items():
         values = value if isinstance(value, tuple) else (value,)
         cmd += [f"--{key.replace('_', '-')}", *(str(v) for v in values)]
@@ -95,6 +101,7 @@ def measure_ours(spec: dict[str, Any], checkout: Path) -> dict[str, Any]:
         summary = json.loads(Path(f"{tmp}/run/summary.json").read_text())
     return {
         "algo": spec["algo"],
+        "compile": bool(spec.get("compile")),
         "checkout": str(checkout),
         "sps": round(summary["train_phase_sps"], 1),
         "library_overall_sps": round(summary["sps"], 1),
@@ -149,6 +156,12 @@ def main() -> None:
         help="another checkout of this repository (e.g. a git worktree of an older commit): its "
         "package is measured beside this one, each algorithm as <algo>@baseline",
     )
+    p.add_argument(
+        "--compile",
+        action="store_true",
+        help="also measure each algorithm with --compile (torch.compile of the update), as "
+        "<algo>+compile",
+    )
     p.add_argument("--name", default="small_sps")
     args = p.parse_args()
     if args.baseline is not None and not (args.baseline / "farsighter" / "train.py").is_file():
@@ -162,6 +175,8 @@ def main() -> None:
         "threads": args.threads,
     }
     entries = (["cleanrl_dqn"] if args.cleanrl else []) + list(args.algos)
+    if args.compile:
+        entries += [f"{a}+compile" for a in args.algos]
     if args.baseline is not None:
         entries += [f"{a}@baseline" for a in args.algos]
     rows: dict[str, list[dict[str, Any]]] = {name: [] for name in entries}
@@ -173,8 +188,9 @@ def main() -> None:
                 row = measure_cleanrl(args.cleanrl, base)
             else:
                 algo, _, which = name.partition("@")
+                algo, plus, _ = algo.partition("+")
                 checkout = args.baseline if which else REPO
-                row = measure_ours({**base, "algo": algo}, checkout)
+                row = measure_ours({**base, "algo": algo, "compile": bool(plus)}, checkout)
             rows[name].append({**row, "round": rnd + 1})
             print(f"  {row['sps']} steps/s", file=sys.stderr, flush=True)
     figures: dict[str, Any] = {
@@ -203,15 +219,14 @@ def main() -> None:
             for n in entries
             if n != "cleanrl_dqn"
         }
+        goal_of = {n: GOALS.get(n.partition("+")[0]) for n in entries}
         figures["goals"] = {
             n: {
-                "goal_ratio": GOALS[n],
-                "met_every_round": all(
-                    x >= GOALS[n] for x in figures["ratio_to_cleanrl_per_round"][n]
-                ),
+                "goal_ratio": goal,
+                "met_every_round": all(x >= goal for x in figures["ratio_to_cleanrl_per_round"][n]),
             }
-            for n in args.algos
-            if n in GOALS
+            for n, goal in goal_of.items()
+            if goal is not None and "@" not in n
         }
     write_result(args.name, figures)
 
