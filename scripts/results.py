@@ -793,6 +793,13 @@ ENTRIES = (
         3380,
     ),
     Entry(
+        "explore/chain30-s44",
+        "explore --families chain --sizes 30 --agents Farsighter --seeds 1 2 3 4 5 --workers 2",
+        "the chain L = 30 with the defaults of session 42, 5 seeds (issue #25's goal: still 5 "
+        "of 5)",
+        145,
+    ),
+    Entry(
         "minatar",
         "atari --games minatar --agents DDQN BDQN Farsighter --seeds 1 2 --steps 50000 "
         "--eval-every 10000 --eval-episodes 10",
