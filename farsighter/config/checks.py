@@ -55,6 +55,12 @@ def _algorithm_checks(cfg: Config, spec: algorithms.Algorithm) -> list[tuple[boo
             not cfg.runtime.compile or spec.agent in STEP_AGENTS,
             f"compile is supported by --algo {step_algos}",
         ),
+        (  # the switch changes the update's branch mid-run, which a replayed graph would not
+            cfg.runtime.cuda_graph != "on" or cfg.blr.optimism == "always",
+            "cuda_graph on does not combine with blr.optimism until-reward (the general "
+            "preset's: its switch changes the update mid-run); use cuda_graph auto or off "
+            "(--compile compiles such a run), or --blr.optimism always",
+        ),
         (
             cfg.k_target == "k" or spec.agent == "farsighter",
             "k_target max, max-mean and cut are only supported by --algo "

@@ -569,8 +569,10 @@ class RuntimeConfig:
     """Capture the update step (forward, loss, backward, optimizer) as a CUDA graph and replay it
     each update, so the host launches it once instead of kernel by kernel
     (farsighter.agents.cuda_graph). auto: on a CUDA device, for the agents whose update allows
-    it (ddqn, kddqn, bdqn, farsighter, rnd, krnd); on: insist (refused for the others, and on
-    CPU); off: eager. The updates are the same either way. Off when compile is on."""
+    it (ddqn, kddqn, bdqn, farsighter, rnd, krnd) and keeps one branch (not with
+    ``blr.optimism until-reward``, the general preset's: its switch changes the update mid-run);
+    on: insist (refused for the others, for until-reward, and on CPU); off: eager. The updates
+    are the same either way. Off when compile is on."""
     overlap_env: Literal["auto", "on", "off"] = "auto"
     """Step the environments while the updates run: at each vector step the actions are sent,
     the updates owed are made while the games step on their own threads, and the step's
