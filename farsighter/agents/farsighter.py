@@ -89,8 +89,7 @@ class FarsighterAgent:
         # Eq. 8, with the target features of sampled next states kept until the next copy
         cache = make_target_cache(cfg, device, self.torso.out_dim)
         self.loss = FarsighterLoss(self.torso, self.head, cfg, cache)
-        # blr.optimism until-reward switches the loss's branch mid-run: compiled, not captured
-        capture = cfg.blr.optimism == "always"
+        capture = not cfg.blr.switches_update  # compiled where asked, not captured
         self.learner = Learner(self.loss, self.torso.parameters(), cfg, device, capture=capture)
         self.replay = make_replay(cfg, obs_space, frame_stack, seed=cfg.seed + 1, device=device)
         self.rng = np.random.default_rng(cfg.seed + 2)

@@ -55,8 +55,8 @@ def _algorithm_checks(cfg: Config, spec: algorithms.Algorithm) -> list[tuple[boo
             not cfg.runtime.compile or spec.agent in STEP_AGENTS,
             f"compile is supported by --algo {step_algos}",
         ),
-        (  # the switch changes the update's branch mid-run, which a replayed graph would not
-            cfg.runtime.cuda_graph != "on" or cfg.blr.optimism == "always",
+        (
+            cfg.runtime.cuda_graph != "on" or not cfg.blr.switches_update,
             "cuda_graph on does not combine with blr.optimism until-reward (the general "
             "preset's: its switch changes the update mid-run); use cuda_graph auto or off "
             "(--compile compiles such a run), or --blr.optimism always",

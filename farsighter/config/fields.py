@@ -233,6 +233,12 @@ class BLRConfig:
     and posterior mean, value under the target network and target mean), or the plain
     max_a phi_target(s')^T mean_target_a (the BDQN authors' code)."""
 
+    @property
+    def switches_update(self) -> bool:
+        """Whether the update changes its branch mid-run (``optimism = until-reward``'s switch):
+        such a run is compiled where asked but never captured as a CUDA graph."""
+        return self.optimism != "always"
+
     def checks(self) -> list[tuple[bool, str]]:
         """(holds, what was wrong and what is accepted) for each field of this section."""
         return [
