@@ -44,6 +44,7 @@ def _first_line(exc: BaseException) -> str:
 
 MINIGRID_PREFIXES = ("MiniGrid-", "BabyAI-")
 MINIGRID_EXTRA = "install the exploration extra: pip install 'farsighter[explore]'"
+BOX2D_EXTRA = "install the Box2D extra: pip install 'farsighter[box2d]'"
 
 
 def _register_builtin(env_id: str) -> None:
@@ -110,6 +111,8 @@ def _make_base(env_id: str, cfg: Config, render_mode: str | None) -> gym.Env:
     except gym.error.DependencyNotInstalled as exc:
         if "mujoco" in str(exc).lower():
             raise EnvError(f"'{env_id}' needs MuJoCo; {MUJOCO_EXTRA}") from None
+        if "box2d" in str(exc).lower():  # Gymnasium's own advice builds box2d-py with swig
+            raise EnvError(f"'{env_id}' needs Box2D; {BOX2D_EXTRA}") from None
         raise EnvError(f"cannot make environment '{env_id}': {_first_line(exc)}") from None
     except (gym.error.Error, ImportError, AttributeError) as exc:
         raise EnvError(
