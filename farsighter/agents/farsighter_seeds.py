@@ -212,8 +212,12 @@ class SeedBatchFarsighter:
             for s, (p, mine) in enumerate(zip(self.parts, seeded, strict=True))
         ]
         phi_SBD = self.torso(by_seed(t.obs_B))
+        # each seed's slice by unbind: its backward stacks the S gradients once, where indexing
+        # phi_SBD[s] S times would give each seed's gradient as a zero-filled (S, B, D) tensor
+        # and add the S of them (S^2 B D of memory traffic; the same values)
+        phi_S = phi_SBD.unbind(0)
         losses = [
-            td_loss(q_taken(phi_SBD[s], p.head.mean_AD, mine["actions_B"]), y_B, cfg.loss)
+            td_loss(q_taken(phi_S[s], p.head.mean_AD, mine["actions_B"]), y_B, cfg.loss)
             for s, (p, mine, y_B) in enumerate(zip(self.parts, seeded, ys, strict=True))
         ]
         self.opt.zero_grad(set_to_none=True)
@@ -227,7 +231,7 @@ class SeedBatchFarsighter:
                 if cfg.blr.posterior_target != "double":
                     y_B = max_targets(TensorBatch.of(mine), features[""][1][s], p.target_mean_AD)
                     y_B = gaps[s](y_B)
-                accumulate(cfg, p.head, p.recent_phi, phi_SBD[s].detach(), mine["actions_B"], y_B)
+                accumulate(cfg, p.head, p.recent_phi, phi_S[s].detach(), mine["actions_B"], y_B)
         return [loss.detach() for loss in losses]
 
     @torch.no_grad()
