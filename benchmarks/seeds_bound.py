@@ -16,8 +16,9 @@ for the second core):
 * ``update_ms_seed_batch``: one update of the S seeds as the library batches them
   (:data:`farsighter.seeds.BATCHED`: each seed's products computed as it computes them alone);
 * ``update_ms_all_rows``: one update of the same agent with S times the minibatch: the S seeds'
-  rows through one network, the most efficient form their arithmetic can take (one product
-  over all rows instead of S smaller ones, one optimizer call, one target computation);
+  rows through one network: less work than the S seeds' (one product over all rows instead of
+  S smaller ones, and one set of weights for the optimizer where S seeds have S), so a time no
+  batched form of them can beat;
 * Farsighter: ``refresh_ms``, one posterior refresh (Eq. 9, a Cholesky factor and a triangular
   inverse per action): each seed refreshes its own posterior, so S of them per period.
 
