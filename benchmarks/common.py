@@ -6,9 +6,10 @@ import json
 import os
 import platform
 import shlex
+import statistics
 import sys
 import time
-from collections.abc import Sequence
+from collections.abc import Callable, Sequence
 from pathlib import Path, PurePath
 from typing import Any
 
@@ -90,6 +91,35 @@ def write_result(name: str, figures: dict[str, Any]) -> Path:
     out.write_text(json.dumps(payload, indent=2) + "\n")
     print(json.dumps(payload, indent=2))
     return out
+
+
+def cpu_model() -> str:
+    """The CPU's model name (``lscpu``'s), from /proc/cpuinfo."""
+    try:
+        with open("/proc/cpuinfo") as fh:
+            for line in fh:
+                if line.startswith("model name"):
+                    return line.split(":", 1)[1].strip()
+    except OSError:
+        pass
+    return "unknown"
+
+
+def median_ms(
+    fn: Callable[[], Any], repeats: int, warmup: int = 5, sync: Callable[[], None] = lambda: None
+) -> float:
+    """The median milliseconds of ``repeats`` calls of ``fn`` after ``warmup`` (``sync`` waits
+    for a device after each call: ``torch.cuda.synchronize`` on a GPU)."""
+    for _ in range(warmup):
+        fn()
+    sync()
+    times = []
+    for _ in range(repeats):
+        t0 = time.perf_counter()
+        fn()
+        sync()
+        times.append(time.perf_counter() - t0)
+    return statistics.median(times) * 1e3
 
 
 def cpu_features() -> dict[str, Any]:

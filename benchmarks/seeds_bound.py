@@ -36,39 +36,39 @@ from __future__ import annotations
 
 import argparse
 import dataclasses
-import statistics
 import tempfile
-import time
 from collections.abc import Callable
 from typing import Any
 
 import numpy as np
 import torch
 
-from benchmarks.common import write_result
+from benchmarks.common import cpu_model, median_ms, write_result
 from benchmarks.seeds_sps import GOAL, TASKS, run_one, task_spec
 
 
-def cpu_model() -> str:
-    try:
-        with open("/proc/cpuinfo") as fh:
-            for line in fh:
-                if line.startswith("model name"):
-                    return line.split(":", 1)[1].strip()
-    except OSError:
-        pass
-    return "unknown"
+def fill(
+    envs: list[Any], cfgs: list[Any], observe: Callable[[list[Any]], None], steps: int
+) -> None:
+    """``steps`` vector steps of uniform actions in each seed's environments (``envs[s]``, reset
+    with ``cfgs[s].seed``), handed to ``observe`` as one VectorStep a seed; the envs closed."""
+    from farsighter.replay import VectorStep
+    from farsighter.session import final_observations
 
-
-def median_ms(fn: Callable[[], Any], repeats: int, warmup: int = 5) -> float:
-    for _ in range(warmup):
-        fn()
-    times = []
-    for _ in range(repeats):
-        t0 = time.perf_counter()
-        fn()
-        times.append(time.perf_counter() - t0)
-    return 1e3 * statistics.median(times)
+    n, num_envs = int(envs[0].single_action_space.n), cfgs[0].num_envs
+    rng = np.random.default_rng(0)
+    obs = [e.reset(seed=c.seed)[0] for e, c in zip(envs, cfgs, strict=True)]
+    for _ in range(steps):
+        vector_steps = []
+        for s, e in enumerate(envs):
+            actions = rng.integers(0, n, size=num_envs)
+            next_obs, rewards, terminated, truncated, info = e.step(actions)
+            final = final_observations(info, num_envs)
+            vector_steps.append(VectorStep(obs[s], actions, rewards, terminated, truncated, final))
+            obs[s] = next_obs
+        observe(vector_steps)
+    for e in envs:
+        e.close()
 
 
 def filled_agent(cfg: Any, batch_size: int, transitions: int) -> Any:
@@ -76,8 +76,6 @@ def filled_agent(cfg: Any, batch_size: int, transitions: int) -> Any:
     ``transitions`` steps of uniform actions in the task's own environment."""
     from farsighter.agents import build_agent
     from farsighter.envs import frame_stack_of, make_vector_env
-    from farsighter.replay import VectorStep
-    from farsighter.session import final_observations
 
     cfg = dataclasses.replace(cfg, batch_size=batch_size)
     envs = make_vector_env(cfg, seed=cfg.seed)
@@ -88,15 +86,7 @@ def filled_agent(cfg: Any, batch_size: int, transitions: int) -> Any:
         frame_stack=frame_stack_of(cfg),
         device=torch.device("cpu"),
     )
-    rng = np.random.default_rng(0)
-    obs, _ = envs.reset(seed=cfg.seed)
-    for _ in range(transitions):
-        actions = rng.integers(0, int(envs.single_action_space.n), size=cfg.num_envs)
-        next_obs, rewards, terminated, truncated, info = envs.step(actions)
-        final = final_observations(info, cfg.num_envs)
-        agent.observe(VectorStep(obs, actions, rewards, terminated, truncated, final))
-        obs = next_obs
-    envs.close()
+    fill([envs], [cfg], lambda steps: agent.observe(steps[0]), transitions)
     return agent
 
 
@@ -104,29 +94,17 @@ def filled_batch(cfg: Any, seeds: int, transitions: int) -> Any:
     """The seed-batched form of the config's agent (:data:`farsighter.seeds.BATCHED`) for seeds
     1..S, each seed's streams filled with ``transitions`` uniform steps of its own environment."""
     from farsighter.envs import make_vector_env
-    from farsighter.replay import VectorStep
     from farsighter.seeds import BATCHED, seed_configs
-    from farsighter.session import final_observations
 
     cfgs = seed_configs(cfg, list(range(1, seeds + 1)))
     envs = [make_vector_env(c, seed=c.seed) for c in cfgs]
-    space = envs[0].single_action_space
     batch = BATCHED[cfg.algo].SeedBatch(
-        cfgs, envs[0].single_observation_space, space, device=torch.device("cpu")
+        cfgs,
+        envs[0].single_observation_space,
+        envs[0].single_action_space,
+        device=torch.device("cpu"),
     )
-    rng = np.random.default_rng(0)
-    obs = [e.reset(seed=c.seed)[0] for e, c in zip(envs, cfgs, strict=True)]
-    for _ in range(transitions):
-        steps = []
-        for s, e in enumerate(envs):
-            actions = rng.integers(0, int(space.n), size=cfg.num_envs)
-            next_obs, rewards, terminated, truncated, info = e.step(actions)
-            final = final_observations(info, cfg.num_envs)
-            steps.append(VectorStep(obs[s], actions, rewards, terminated, truncated, final))
-            obs[s] = next_obs
-        batch.observe(steps)
-    for e in envs:
-        e.close()
+    fill(envs, cfgs, batch.observe, transitions)
     return batch
 
 

@@ -41,7 +41,7 @@ import numpy as np
 import torch
 from torch import nn
 
-from benchmarks.common import cpu_features, write_result
+from benchmarks.common import cpu_features, median_ms, write_result
 from farsighter import make_config
 from farsighter.agents.common import make_optimizer, obs_tensor, td_loss
 from farsighter.agents.cuda_graph import GraphedStep, set_capturable
@@ -89,19 +89,6 @@ def build(layout: str, num_actions: int, device: torch.device) -> QNet:
     return net
 
 
-def median_ms(fn: Callable[[], Any], sync: Callable[[], None], warmup: int, repeats: int) -> float:
-    for _ in range(warmup):
-        fn()
-    sync()
-    times = []
-    for _ in range(repeats):
-        t0 = time.perf_counter()
-        fn()
-        sync()
-        times.append(time.perf_counter() - t0)
-    return statistics.median(times) * 1e3
-
-
 def profile_layout(
     layout: str, args: argparse.Namespace, device: torch.device, sync: Callable[[], None]
 ) -> dict[str, Any]:
@@ -138,7 +125,7 @@ def profile_layout(
         backward(q_B, targets())
         optimizer()
 
-    whole = median_ms(update, sync, args.warmup, args.repeats)
+    whole = median_ms(update, args.repeats, args.warmup, sync)
     faults0 = resource.getrusage(resource.RUSAGE_SELF).ru_minflt
     for _ in range(FAULT_UPDATES):
         update()
@@ -155,14 +142,14 @@ def profile_layout(
 
         set_capturable(opt, True)
         step = GraphedStep(step_fn)
-        graphed = round(median_ms(lambda: step({}), sync, args.warmup, args.repeats), 3)
+        graphed = round(median_ms(lambda: step({}), args.repeats, args.warmup, sync), 3)
         set_capturable(opt, False)
     compiled = None
     if (
         args.compile
     ):  # the same update through torch.compile (RuntimeConfig.compile); compiles first
         compiled_update = torch.compile(update, dynamic=False)
-        compiled = round(median_ms(compiled_update, sync, args.warmup, args.repeats), 3)
+        compiled = round(median_ms(compiled_update, args.repeats, args.warmup, sync), 3)
 
     phases: dict[str, list[float]] = {
         "forward_s": [],
@@ -215,7 +202,7 @@ def profile_layout(
             net(obs_tensor(frame_np, device)).argmax(dim=1).cpu().numpy()
 
         extras = {
-            name: round(median_ms(fn, sync, args.warmup, args.repeats), 4)
+            name: round(median_ms(fn, args.repeats, args.warmup, sync), 4)
             for name, fn in (
                 ("acting_forward_torso", act_forward),
                 ("thompson_q_sample", q_sample),
