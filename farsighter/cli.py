@@ -6,7 +6,6 @@ Bad input prints one line, ``farsighter: error: <what> ...(accepted: ...)``, and
 from __future__ import annotations
 
 import dataclasses
-import json
 import sys
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass
@@ -15,8 +14,9 @@ from typing import Annotated
 
 import tyro
 
+from farsighter import jsonio
 from farsighter.config import Config, load_config, make_config, resolve_preset_name
-from farsighter.errors import ConfigError, FarsighterError, RunDirError
+from farsighter.errors import ConfigError, FarsighterError, Interrupted, RunDirError
 from farsighter.rundir import CONFIG_FILE, check_same_run
 
 USAGE = """usage: farsighter <command> [options]
@@ -27,6 +27,8 @@ commands:
             farsighter robotics --env Walker2d-v5 --steps 30000 --seeds 1 2 3 [--quick]
   explore   the exploration suite (chain, MiniGrid, MountainCar at growing sizes):
             farsighter explore [--quick] [--families chain doorkey] [--sizes 5 10] [--out DIR]
+  suite     the exploration suite's normalised scores, one aggregate (IQM) per selection and
+            validation set: farsighter suite [--quick] [--set selection] [--families chain]
   k-study   the sweep over k (Fig. 4) with adaptive k, on the bridge maze or any discrete task:
             farsighter k-study [--quick] [--envs farsighter/BridgeMaze-v0 CartPole-v1] [--out DIR]
   atari     the Atari study (Fig. 2, Table 2), on ALE games or MinAtar:
@@ -146,13 +148,22 @@ def split_seeds(argv: Sequence[str]) -> tuple[list[str], list[int] | None]:
 
 
 def cmd_train(argv: Sequence[str]) -> int:
+    """Training, where SIGINT (Ctrl-C) and SIGTERM save a checkpoint after the step in progress
+    and exit with 130 and 143 (:mod:`farsighter.interrupt`)."""
+    from farsighter.interrupt import stop_on_signal
+
+    with stop_on_signal():
+        return _train_command(argv)
+
+
+def _train_command(argv: Sequence[str]) -> int:
     from farsighter.seeds import seed_configs, train_seeds
     from farsighter.train import train
 
     rest, seeds = split_seeds(argv)
     if seeds is None:
         summary = train(train_config(rest))
-        print(json.dumps(summary, indent=2))
+        print(jsonio.dumps(summary))
         return 0
     lead, _ = tyro.cli(TrainLead, args=_without_help(rest), return_unknown_args=True)
     if lead.resume:  # each seed's saved config, from its own directory
@@ -164,7 +175,7 @@ def cmd_train(argv: Sequence[str]) -> int:
     else:
         cfgs = seed_configs(train_config(rest), seeds)
     summaries = train_seeds(cfgs)
-    print(json.dumps(summaries, indent=2))
+    print(jsonio.dumps(summaries))
     return 0
 
 
@@ -198,7 +209,7 @@ def cmd_eval(argv: Sequence[str]) -> int:
     }
     if result.successes:  # goal-conditioned tasks report info["is_success"]
         report["success_rate"] = float(np.mean(result.successes))
-    print(json.dumps(report, indent=2))
+    print(jsonio.dumps(report))
     return 0
 
 
@@ -279,6 +290,12 @@ def cmd_explore(argv: Sequence[str]) -> int:
     return explore_main(argv)
 
 
+def cmd_suite(argv: Sequence[str]) -> int:
+    from farsighter.studies.suite import main as suite_main
+
+    return suite_main(argv)
+
+
 def cmd_k_study(argv: Sequence[str]) -> int:
     from farsighter.studies.kstudy import main as k_study_main
 
@@ -301,6 +318,7 @@ COMMANDS: dict[str, Callable[[Sequence[str]], int]] = {
     "maze": cmd_maze,
     "robotics": cmd_robotics,
     "explore": cmd_explore,
+    "suite": cmd_suite,
     "k-study": cmd_k_study,
     "atari": cmd_atari,
     "sweep": cmd_sweep,
@@ -328,6 +346,9 @@ def main(argv: Sequence[str] | None = None) -> int:
     except FarsighterError as exc:
         print(f"farsighter: error: {exc}", file=sys.stderr)
         return 2
+    except Interrupted as exc:  # farsighter train: saved, or stopped by a second signal
+        print(f"farsighter: {exc}", file=sys.stderr)
+        return 128 + exc.signum
     except KeyboardInterrupt:
         print("farsighter: interrupted; continue the run with --resume", file=sys.stderr)
         return 130

@@ -27,3 +27,14 @@ class Diverged(FarsighterError):
             "(smaller steps, --lr, or for the Bayesian agents a narrower prior, --blr.prior-std, "
             "are what to try); what the run directory saved before is kept"
         )
+
+
+class Interrupted(KeyboardInterrupt):
+    """SIGINT or SIGTERM stopped ``farsighter train`` (:mod:`farsighter.interrupt`): the CLI
+    prints the message as one line and exits with 128 + ``signum`` (130, 143). A
+    KeyboardInterrupt, so that what handles Ctrl-C handles it, and no ``except Exception`` on
+    the way turns it into another error."""
+
+    def __init__(self, signum: int, message: str) -> None:
+        super().__init__(message)
+        self.signum = signum

@@ -94,36 +94,45 @@ def check_same_run(cfg: Config, saved: Config | None = None) -> None:
         )
 
 
+def check_resume(cfg: Config) -> tuple[Config, Config]:
+    """With ``resume``: the run directory's saved config and the config this resume records
+    there (the saved one with the :data:`RESUMABLE_FIELDS` given, such as a longer
+    ``total_steps``). Refuses (:class:`RunDirError`, one line) a directory without a run and a
+    config that differs from the saved one outside those fields; writes nothing."""
+    path = cfg.resolved_run_dir
+    if cfg.overwrite:
+        raise RunDirError("--resume and --overwrite exclude each other; pass one")
+    if not (path / CONFIG_FILE).is_file():
+        raise RunDirError(f"cannot resume: {path} holds no run (no {CONFIG_FILE})")
+    saved = load_config(path / CONFIG_FILE)
+    check_same_run(cfg, saved)
+    before, given = dict(flat_fields(saved)), dict(flat_fields(cfg))
+    diffs = [
+        f"{name} (saved {before[name]!r}, given {given[name]!r})"
+        for name in given
+        if name not in RESUMABLE_FIELDS and before[name] != given[name]
+    ]
+    if diffs:
+        raise RunDirError(
+            "cannot resume with a different config: "
+            + "; ".join(diffs[:3])
+            + " (resume with the original flags, or use a new --run-dir)"
+        )
+    # Record what this resume changed (where the run lives and the flags stay as saved).
+    recorded = sorted(RESUMABLE_FIELDS - {"resume", "overwrite", "run_dir"})
+    return saved, with_values(saved, {name: given[name] for name in recorded})
+
+
 def prepare_run_dir(cfg: Config) -> Path:
     """Create (or reopen with ``resume``) the run directory; never overwrite unless asked.
 
     A resume must match the saved config outside :data:`RESUMABLE_FIELDS`; the resumable values
-    it gives (a longer ``total_steps``, say) are recorded in config.json. A directory that cannot
-    be created or written raises :class:`RunDirError`, one line with the reason."""
+    it gives (a longer ``total_steps``, say) are recorded in config.json (:func:`check_resume`).
+    A directory that cannot be created or written raises :class:`RunDirError`, one line with the
+    reason."""
     path = cfg.resolved_run_dir
-
-    if cfg.resume and cfg.overwrite:
-        raise RunDirError("--resume and --overwrite exclude each other; pass one")
     if cfg.resume:
-        if not (path / CONFIG_FILE).is_file():
-            raise RunDirError(f"cannot resume: {path} holds no run (no {CONFIG_FILE})")
-        saved = load_config(path / CONFIG_FILE)
-        check_same_run(cfg, saved)
-        before, given = dict(flat_fields(saved)), dict(flat_fields(cfg))
-        diffs = [
-            f"{name} (saved {before[name]!r}, given {given[name]!r})"
-            for name in given
-            if name not in RESUMABLE_FIELDS and before[name] != given[name]
-        ]
-        if diffs:
-            raise RunDirError(
-                "cannot resume with a different config: "
-                + "; ".join(diffs[:3])
-                + " (resume with the original flags, or use a new --run-dir)"
-            )
-        # Record what this resume changed (where the run lives and the flags stay as saved).
-        recorded = sorted(RESUMABLE_FIELDS - {"resume", "overwrite", "run_dir"})
-        updated = with_values(saved, {name: given[name] for name in recorded})
+        saved, updated = check_resume(cfg)
         if updated != saved:
             try:
                 save_config(updated, path / CONFIG_FILE)

@@ -35,10 +35,18 @@ from farsighter.agents import ddqn_seeds, farsighter_seeds, rnd_seeds
 from farsighter.config import Config, validate
 from farsighter.envs import check_spaces, make_vector_env
 from farsighter.errors import ConfigError
+from farsighter.interrupt import interrupted, requested
 from farsighter.replay import VectorStep
 from farsighter.rundir import check_same_run, load_checkpoint, prepare_run_dir
 from farsighter.runtime import prepare_process
-from farsighter.session import Callback, LoopState, RunLog, final_observations, restore_run
+from farsighter.session import (
+    Callback,
+    LoopState,
+    RunLog,
+    check_transition,
+    final_observations,
+    restore_run,
+)
 from farsighter.train import resolve_device, train
 
 __all__ = ["BATCHED", "batchable", "seed_configs", "train_seeds"]
@@ -187,6 +195,7 @@ def _train_batch(
             for run, actions in zip(runs, actions_SE, strict=True):
                 next_obs, rewards, terminated, truncated, info = run.envs.step(actions)
                 final = final_observations(info, cfg.num_envs)
+                check_transition(run.cfg.env, step, rewards, next_obs, final)
                 vector_steps.append(
                     VectorStep(run.obs, actions, rewards, terminated, truncated, final)
                 )
@@ -200,6 +209,10 @@ def _train_batch(
                     run.state, prev, info, mine, member, run.envs, run.obs, run.callbacks
                 )
             bar.update(cfg.num_envs * len(runs))
+            if requested() and step < cfg.total_steps:  # SIGINT / SIGTERM: every seed saved
+                for run, member in zip(runs, members, strict=True):
+                    run.log.checkpoint(run.state, member, run.envs, run.obs)
+                raise interrupted(step, ", ".join(str(run.path) for run in runs))
         for run, member in zip(runs, members, strict=True):
             run.log.finish(run.state, member, run.envs, run.obs, run.callbacks)
         return [run.log.summary(run.state) for run in runs]

@@ -21,9 +21,10 @@ import numpy as np
 import torch
 from tqdm import tqdm
 
+from farsighter import jsonio
 from farsighter.agents import Agent
 from farsighter.config import Config
-from farsighter.errors import Diverged, RunDirError
+from farsighter.errors import Diverged, EnvError, RunDirError
 from farsighter.rundir import SUMMARY_FILE, RunLogger, load_checkpoint, save_checkpoint
 
 POLICY_FILE = "policy.pt"  # the trained agent without its replay, for acting
@@ -96,11 +97,17 @@ def save_run(
 
 
 def restore_run(
-    path: Path, cfg: Config, agent: Agent, envs: gym.vector.VectorEnv
+    path: Path,
+    cfg: Config,
+    agent: Agent,
+    envs: gym.vector.VectorEnv,
+    checkpoint: dict[str, Any] | None = None,
 ) -> tuple[LoopState, gym.vector.VectorEnv, Any]:
-    """Load the last checkpoint into ``agent``; returns the loop state, the environments (those
-    saved, or ``envs`` reset to fresh episodes when they were not) and the observation."""
-    checkpoint = load_checkpoint(path)
+    """Load the last checkpoint (``checkpoint``: it, read already) into ``agent``; returns the
+    loop state, the environments (those saved, or ``envs`` reset to fresh episodes when they
+    were not) and the observation."""
+    if checkpoint is None:
+        checkpoint = load_checkpoint(path)
     version = checkpoint.get("version", 1)
     if version != CHECKPOINT_VERSION:
         raise RunDirError(
@@ -257,6 +264,45 @@ def final_observations(info: dict[str, Any], num_envs: int) -> list[Any] | None:
         return None
     mask = info["_final_obs"]
     return [info["final_obs"][i] if mask[i] else None for i in range(num_envs)]
+
+
+def check_transition(
+    env_id: str, step: int, rewards: np.ndarray, obs: Any, final_obs: list[Any] | None
+) -> None:
+    """Refuse, with one line naming the environment and ``step``, a vector step whose rewards or
+    (floating-point) observations hold NaN or infinity: the environment's fault, which would
+    otherwise reach the updates and read as diverged training. One ``isfinite`` pass over the
+    rewards and one over the observations (none for integer images); the last observations of
+    the episodes that ended (``final_obs``) are checked too."""
+    floats = isinstance(obs, np.ndarray) and obs.dtype.kind == "f"
+    if np.isfinite(rewards).all() and not final_obs and (not floats or np.isfinite(obs).all()):
+        return
+    found = _non_finite(rewards)
+    what = "a reward of"
+    if found is None:
+        what = "an observation holding"
+        found = _non_finite(obs)
+        for i, last in enumerate(final_obs or ()):
+            if found is None and last is not None:
+                at_last = _non_finite(np.asarray(last)[None])
+                found = None if at_last is None else (i, at_last[1])
+    if found is not None:
+        raise EnvError(
+            f"the environment {env_id} returned {what} {found[1]} at step {step:,} "
+            f"(environment {found[0]}); a NaN or infinite reward or observation is the "
+            "environment's to fix"
+        )
+
+
+def _non_finite(values: Any) -> tuple[int, float] | None:
+    """(row, value) of the first non-finite entry of a floating-point batch (rows: the
+    environments); None when every entry is finite or the batch holds no floats."""
+    batch = np.asarray(values)
+    if batch.dtype.kind != "f" or np.isfinite(batch).all():
+        return None
+    rows = batch.reshape(len(batch), -1)
+    row = int(np.flatnonzero(~np.isfinite(rows).all(axis=1))[0])
+    return row, float(rows[row][~np.isfinite(rows[row])][0])
 
 
 def episode_diagnostics(agent: Agent) -> dict[str, float]:
@@ -437,8 +483,15 @@ class RunLog:
         if passed_multiple(prev_step, step, cfg.eval_every):
             self.evaluate(state, agent)
         if passed_multiple(prev_step, step, cfg.checkpoint_every) and step < cfg.total_steps:
-            self.logger.flush()  # the logs up to the checkpoint are on disk before it is
-            save_run(self.path, cfg, state, agent, envs, obs)
+            self.checkpoint(state, agent, envs, obs)
+
+    def checkpoint(
+        self, state: LoopState, agent: Agent, envs: gym.vector.VectorEnv, obs: Any
+    ) -> None:
+        """A checkpoint after the step just logged (periodic, or on an interrupt): the logs up
+        to it reach the disk first, so a resume from it keeps them and repeats none."""
+        self.logger.flush()
+        save_run(self.path, self.cfg, state, agent, envs, obs)
 
     def finish(
         self,
@@ -473,22 +526,15 @@ class RunLog:
             if phase is not None and state.global_step > phase[0]
             else float("nan")
         )
-        recent = state.recent_returns
-        summary = {
-            "algo": self.cfg.algo,
-            "env": self.cfg.env,
-            "seed": self.cfg.seed,
-            "global_step": state.global_step,
-            "episodes": state.episodes,
-            "final_eval_return": state.last_eval,
-            "best_eval_return": state.best_eval,
-            "mean_recent_return": float(np.mean(recent)) if recent else None,
-            "wall_seconds": elapsed,
-            "sps": (state.global_step - self.start[0]) / max(elapsed, 1e-9),
-            "train_phase_sps": train_sps,
-            "run_dir": str(self.path),
-        }
-        (self.path / SUMMARY_FILE).write_text(json.dumps(summary, indent=2) + "\n")
+        summary = run_summary(self.cfg, self.path, state)
+        run_dir = summary.pop("run_dir")
+        summary.update(
+            wall_seconds=elapsed,
+            sps=(state.global_step - self.start[0]) / max(elapsed, 1e-9),
+            train_phase_sps=train_sps,
+            run_dir=run_dir,
+        )
+        (self.path / SUMMARY_FILE).write_text(jsonio.dumps(summary) + "\n")
         return summary
 
     def close(self) -> None:
@@ -496,6 +542,53 @@ class RunLog:
         self.logger.close()
         for env in self.eval_envs:
             env.close()
+
+
+def run_summary(cfg: Config, path: Path, state: LoopState) -> dict[str, Any]:
+    """What the summary says of a run at ``state`` (the timings aside)."""
+    recent = state.recent_returns
+    return {
+        "algo": cfg.algo,
+        "env": cfg.env,
+        "seed": cfg.seed,
+        "global_step": state.global_step,
+        "episodes": state.episodes,
+        "final_eval_return": state.last_eval,
+        "best_eval_return": state.best_eval,
+        "mean_recent_return": float(np.mean(recent)) if recent else None,
+        "run_dir": str(path),
+    }
+
+
+def nothing_to_resume(cfg: Config, checkpoint: Mapping[str, Any]) -> dict[str, Any] | None:
+    """A resume (``cfg.resume``) that asks for no more steps than its checkpoint has done: one
+    line on stderr saying so, and the run's summary (summary.json's, when the run finished at
+    that step), with nothing in the run directory changed. None when steps are left, or when
+    the checkpoint is at ``total_steps`` but the run did not finish there (stopped in its final
+    evaluation or files: the resume completes them)."""
+    path, done = cfg.resolved_run_dir, int(checkpoint["loop"]["global_step"])
+    if cfg.total_steps > done:
+        return None
+    try:
+        saved = json.loads((path / SUMMARY_FILE).read_text())
+    except (OSError, ValueError):
+        saved = None
+    finished = isinstance(saved, dict) and saved.get("global_step") == done
+    if not finished and cfg.total_steps == done:
+        return None
+    again = "give a larger --total-steps to continue it"
+    if finished:
+        line = f"the run in {path} has finished its {done:,} steps; nothing to do ({again})"
+    else:
+        line = (
+            f"the run in {path} has done {done:,} steps, more than --total-steps "
+            f"{cfg.total_steps:,}; nothing to do ({again})"
+        )
+    print(f"farsighter: {line}", file=sys.stderr)
+    if finished:
+        assert isinstance(saved, dict)
+        return saved
+    return run_summary(cfg, path, LoopState.from_dict(checkpoint["loop"]))
 
 
 def _make_eval_envs(cfg: Config) -> list[gym.Env]:

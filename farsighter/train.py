@@ -16,8 +16,15 @@ from farsighter.agents.cuda_graph import check_compiler, graphs_enabled
 from farsighter.config import Config, load_config, validate
 from farsighter.envs import check_spaces, frame_stack_of, make_env, make_vector_env
 from farsighter.errors import ConfigError, RunDirError
+from farsighter.interrupt import interrupted, requested, stop_before_start
 from farsighter.replay import VectorStep
-from farsighter.rundir import CONFIG_FILE, check_same_run, load_checkpoint, prepare_run_dir
+from farsighter.rundir import (
+    CONFIG_FILE,
+    check_resume,
+    check_same_run,
+    load_checkpoint,
+    prepare_run_dir,
+)
 from farsighter.runtime import prepare_process
 from farsighter.session import (
     POLICY_FILE,
@@ -25,8 +32,10 @@ from farsighter.session import (
     EvalResult,
     LoopState,
     RunLog,
+    check_transition,
     evaluate_episodes,
     final_observations,
+    nothing_to_resume,
     restore_run,
 )
 
@@ -82,12 +91,22 @@ def random_features_note(width: int, obs_shape: tuple[int, ...], env: str) -> st
 def train(cfg: Config, callbacks: Sequence[Callback] = ()) -> dict[str, Any]:
     """Train ``cfg.algo`` on ``cfg.env``; returns the run's summary (also in summary.json).
 
-    ``callbacks`` see every vector step's ``info`` and the agent, read-only by contract."""
+    ``callbacks`` see every vector step's ``info`` and the agent, read-only by contract. A
+    resume to no more steps than were done changes nothing (:func:`nothing_to_resume`). Inside
+    :func:`farsighter.interrupt.stop_on_signal`, SIGINT or SIGTERM ends the step, saves a
+    checkpoint and raises :class:`~farsighter.errors.Interrupted`."""
     check_same_run(cfg)  # a resume as another algorithm or env: said so before validate
     validate(cfg)
     device = resolve_device(cfg.runtime.device)
     graphs_enabled(cfg.runtime.cuda_graph, device)  # cuda_graph on with no GPU: refused
     check_compiler(cfg.runtime.compile, device)  # compile on a CPU without a C++ compiler: refused
+    checkpoint = None
+    if cfg.resume:
+        check_resume(cfg)  # a flag a resume may not change: refused before the checkpoint is read
+        checkpoint = load_checkpoint(cfg.resolved_run_dir)
+        done = nothing_to_resume(cfg, checkpoint)
+        if done is not None:
+            return done
     envs: gym.vector.VectorEnv = make_vector_env(
         cfg, seed=cfg.seed
     )  # a bad id fails before the run dir is touched
@@ -99,11 +118,13 @@ def train(cfg: Config, callbacks: Sequence[Callback] = ()) -> dict[str, Any]:
     if note:
         print(note, file=sys.stderr)
     overlap = overlap_enabled(cfg.runtime.overlap_env, envs, device)
+    stop_before_start()  # Ctrl-C while the environments were made: the run directory untouched
     path = prepare_run_dir(cfg)
     prepare_process(cfg.runtime.torch_threads)
     agent = build_agent(cfg, obs_space, act_space, frame_stack=frame_stack_of(cfg), device=device)
-    if cfg.resume:
-        state, envs, obs = restore_run(path, cfg, agent, envs)
+    if checkpoint is not None:
+        state, envs, obs = restore_run(path, cfg, agent, envs, checkpoint)
+        checkpoint = None  # its replay is in the agent now: not held twice
     else:
         state, (obs, _) = LoopState(), envs.reset(seed=cfg.seed)
     async_envs: Any = envs  # with overlap: step_async / step_wait (overlap_enabled checked them)
@@ -119,11 +140,15 @@ def train(cfg: Config, callbacks: Sequence[Callback] = ()) -> dict[str, Any]:
             else:
                 next_obs, rewards, terminated, truncated, info = envs.step(actions)
             final_obs = final_observations(info, cfg.num_envs)
+            check_transition(cfg.env, state.global_step, rewards, next_obs, final_obs)
             agent.observe(VectorStep(obs, actions, rewards, terminated, truncated, final_obs))
             obs = next_obs
             if not overlap:
                 metrics = agent.learn(state.global_step)
             log.after_step(state, prev_step, info, metrics, agent, envs, obs, callbacks)
+            if requested() and state.global_step < cfg.total_steps:  # SIGINT / SIGTERM
+                log.checkpoint(state, agent, envs, obs)
+                raise interrupted(state.global_step, str(path))
         log.finish(state, agent, envs, obs, callbacks)
     finally:
         log.close()

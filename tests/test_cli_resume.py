@@ -179,3 +179,35 @@ def test_a_config_saved_before_the_runtime_section_loads_its_runtime_fields() ->
     flat.update(runtime)  # the layout of a run directory written before the section existed
     assert config_from_dict(flat) == cfg
     assert config_from_dict(config_to_dict(cfg)) == cfg
+
+
+def test_a_resume_to_no_more_steps_than_done_changes_nothing(
+    tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    """``--resume --total-steps N`` with N at or below the steps done: one line saying so, exit
+    0, and no file of the run directory written (no evaluation, summary.json as it was)."""
+    from farsighter.cli import main
+
+    run = tmp_path / "run"
+    assert main(["train", "--run-dir", str(run), *FIRST]) == 0
+    capsys.readouterr()
+
+    def files() -> dict[str, tuple[bytes, int]]:
+        return {p.name: (p.read_bytes(), p.stat().st_mtime_ns) for p in sorted(run.iterdir())}
+
+    before = files()
+    for total in ("300", "200"):
+        assert main(["train", "--run-dir", str(run), "--resume", "--total-steps", total]) == 0
+        err = capsys.readouterr().err.strip().splitlines()
+        assert err == [
+            f"farsighter: the run in {run} has finished its 300 steps; nothing to do (give a "
+            "larger --total-steps to continue it)"
+        ]
+        assert files() == before
+    # a run stopped past the steps asked (no summary of its own): the same, nothing written
+    (run / "summary.json").unlink()
+    before = files()
+    assert main(["train", "--run-dir", str(run), "--resume", "--total-steps", "200"]) == 0
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1 and "has done 300 steps, more than --total-steps 200; nothing" in err[0]
+    assert files() == before

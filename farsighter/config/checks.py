@@ -5,9 +5,11 @@ spans sections."""
 
 from __future__ import annotations
 
+import math
+
 from farsighter import algorithms
 from farsighter.config.fields import Config
-from farsighter.config.presets import is_atari_id
+from farsighter.config.presets import flat_fields, is_atari_id
 from farsighter.errors import ConfigError
 
 
@@ -19,6 +21,9 @@ def validate(cfg: Config) -> None:
         for ok, message in checks:
             if not ok:
                 raise ConfigError(message)
+    for name, value in flat_fields(cfg):  # config.json is strict JSON: no NaN or Infinity
+        if isinstance(value, float) and not math.isfinite(value):
+            raise ConfigError(f"{name} must be a finite number (got {value})")
 
 
 STEP_AGENTS = ("ddqn", "farsighter", "rnd")

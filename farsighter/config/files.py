@@ -8,6 +8,7 @@ import os
 from pathlib import Path
 from typing import Any
 
+from farsighter import jsonio
 from farsighter.config.fields import Config, RuntimeConfig
 from farsighter.errors import ConfigError
 
@@ -47,7 +48,7 @@ def config_from_dict(data: dict[str, Any]) -> Config:
 def save_config(cfg: Config, path: Path) -> None:
     """Write atomically: a crash mid-write leaves the previous file intact."""
     tmp = path.with_name(path.name + ".tmp")
-    tmp.write_text(json.dumps(config_to_dict(cfg), indent=2) + "\n")
+    tmp.write_text(jsonio.dumps(config_to_dict(cfg)) + "\n")
     os.replace(tmp, path)
 
 

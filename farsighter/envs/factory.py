@@ -1,13 +1,16 @@
 """One environment factory for every agent: any Gymnasium id, Atari preprocessing for ALE ids,
-MinAtar's planes channels-first, goal-conditioned (dict-observation) robotics tasks flattened to
-vectors, and any other observation space Gymnasium can flatten (Discrete as a one-hot vector,
-MultiDiscrete, MultiBinary, Tuple, Dict, Box grids) made a float32 vector."""
+MinAtar's planes and other (H, W, C) images channels-first, goal-conditioned (dict-observation)
+robotics tasks flattened to vectors, and any other observation space Gymnasium can flatten
+(Discrete as a one-hot vector, MultiDiscrete, MultiBinary, Tuple, Dict, Box grids) made a float32
+vector."""
 
 from __future__ import annotations
 
 import contextlib
 import importlib
 import io
+import os
+import sys
 from collections.abc import Callable
 from dataclasses import dataclass
 from functools import partial
@@ -51,6 +54,7 @@ def _register_builtin(env_id: str) -> None:
     # Importing registers ``farsighter/BridgeMaze-v0`` and friends (idempotent); a chain id
     # ``farsighter/Chain<L>-v0`` or a deep sea id is registered when first named.
     importlib.import_module("farsighter.envs.maze")
+    importlib.import_module("farsighter.envs.tabular")
     register_chain(env_id)
     register_deep_sea(env_id)
 
@@ -83,7 +87,19 @@ def _register_robotics(env_id: str) -> None:
     gym.register_envs(gymnasium_robotics)
 
 
+def _cwd_importable(env_id: str) -> None:
+    """For ``module:EnvId``: the current directory on ``sys.path`` (at its end, so it shadows
+    nothing installed), as ``python -m farsighter`` has it, so that the ``farsighter`` console
+    script finds a module beside the command too."""
+    if ":" not in env_id:
+        return
+    cwd = os.getcwd()
+    if cwd not in sys.path and "" not in sys.path:
+        sys.path.append(cwd)
+
+
 def _make_base(env_id: str, cfg: Config, render_mode: str | None) -> gym.Env:
+    _cwd_importable(env_id)
     _register_builtin(env_id)
     _register_robotics(env_id)
     _register_minigrid(env_id)
@@ -140,6 +156,8 @@ def make_env(
             env = FlattenGoalObservation(env, include_achieved=cfg.naf.her)
         elif flattenable(env.observation_space):
             env = FlatObservation(env)
+        elif is_channels_last(env.observation_space):
+            env = ChannelsFirst(env)
         env = gym.wrappers.RecordEpisodeStatistics(env)
     env.action_space.seed(seed)
     env.observation_space.seed(seed)
@@ -265,6 +283,36 @@ class FlatObservation(gym.ObservationWrapper):
     def observation(self, observation: Any) -> np.ndarray:
         flat = gym.spaces.flatten(self.original_space, observation)
         return np.asarray(flat, dtype=np.float32)
+
+
+IMAGE_CHANNELS = (1, 3, 4)
+"""Channel counts of an image: grey, RGB, RGBA (or four stacked grey frames)."""
+
+
+def is_channels_last(space: gym.Space) -> bool:
+    """A Box image in height-width-channel layout, (H, W, C) with C in :data:`IMAGE_CHANNELS`
+    and H not (a (C, H, W) image the torsos take as it is would have its channels first)."""
+    if not isinstance(space, gym.spaces.Box) or space.shape is None or len(space.shape) != 3:
+        return False
+    return space.shape[2] in IMAGE_CHANNELS and space.shape[0] not in IMAGE_CHANNELS
+
+
+class ChannelsFirst(gym.ObservationWrapper):
+    """An (H, W, C) image observation as (C, H, W), the layout of the image torsos (the Nature
+    CNN, as for Atari frames)."""
+
+    def __init__(self, env: gym.Env) -> None:
+        super().__init__(env)
+        space = env.observation_space
+        assert isinstance(space, gym.spaces.Box)  # is_channels_last() checked it
+        self.observation_space = gym.spaces.Box(
+            np.transpose(space.low, (2, 0, 1)),
+            np.transpose(space.high, (2, 0, 1)),
+            dtype=space.dtype,
+        )
+
+    def observation(self, observation: Any) -> np.ndarray:
+        return np.ascontiguousarray(np.transpose(observation, (2, 0, 1)))
 
 
 class MiniGridImage(gym.ObservationWrapper):

@@ -24,6 +24,7 @@ from typing import Annotated, Any, Protocol
 import numpy as np
 import tyro
 
+from farsighter import jsonio
 from farsighter.config import Config, make_config, validate
 from farsighter.errors import ConfigError, FarsighterError
 from farsighter.provenance import code_version
@@ -385,12 +386,12 @@ def _prepare(study: Study, settings: Any, out: Path) -> list[Job]:
     the longest first: a finished run is kept, an unfinished one removed and done again."""
     out.mkdir(parents=True, exist_ok=True)
     saved = out / "study.json"
-    current = json.loads(json.dumps(dataclasses.asdict(settings)))
+    current = json.loads(jsonio.dumps(dataclasses.asdict(settings)))
     made_by: list[dict[str, Any]] = []
     if saved.exists():
         # a field added since it was saved takes its default
         before = _read(saved)
-        previous = json.loads(json.dumps(dataclasses.asdict(settings_of(study, before))))
+        previous = json.loads(jsonio.dumps(dataclasses.asdict(settings_of(study, before))))
         if {**previous, "workers": 0} != {**current, "workers": 0}:
             raise FarsighterError(
                 f"{out} holds a study with other settings ({saved}); use another --out or "
@@ -401,7 +402,7 @@ def _prepare(study: Study, settings: Any, out: Path) -> list[Job]:
     version = code_version()
     if not made_by or made_by[-1] != version:
         made_by.append(version)
-    saved.write_text(json.dumps({**current, "made_by": made_by}, indent=2) + "\n")
+    saved.write_text(jsonio.dumps({**current, "made_by": made_by}) + "\n")
     todo = []
     for job in study.grid(settings):
         run_dir = job.run_dir(out)

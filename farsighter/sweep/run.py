@@ -31,6 +31,7 @@ from typing import Annotated, Any
 import numpy as np
 import tyro
 
+from farsighter import jsonio
 from farsighter.errors import FarsighterError
 from farsighter.rundir import CHECKPOINT_FILE, EVAL_FILE, SUMMARY_FILE
 from farsighter.sweep.engine import (
@@ -195,7 +196,7 @@ def _prepare(spec: SweepSpec, out: Path) -> None:
             )
     text = Path(spec.source).read_text() if Path(spec.source).is_file() else ""
     record = {"name": spec.name, "source": spec.source, "text": text, "trials": names}
-    saved.write_text(json.dumps(record, indent=2) + "\n")
+    saved.write_text(jsonio.dumps(record) + "\n")
 
 
 def run_trial(trial: Trial, run_dir: str, progress: Any) -> str:
@@ -277,12 +278,17 @@ def results(spec: SweepSpec, out: Path) -> list[dict[str, Any]]:
                 "seed": trial.seed,
                 **{k: v for k, v in trial.swept},
                 "steps": summary["global_step"],
-                "final_eval_return": summary["final_eval_return"],
-                "best_eval_return": summary["best_eval_return"],
+                # null in summary.json: no finite value (strict JSON has no NaN)
+                "final_eval_return": _number(summary["final_eval_return"]),
+                "best_eval_return": _number(summary["best_eval_return"]),
                 "attempts": attempts(path),
             }
         )
     return rows
+
+
+def _number(value: float | None) -> float:
+    return float("nan") if value is None else float(value)
 
 
 def normalization(envs: Sequence[str]) -> str:
