@@ -2,9 +2,10 @@
 
 A refactoring that changes no behaviour leaves every trained tensor byte-identical. This script
 trains each run below for a few thousand steps on CPU with one thread and hashes what the agent
-saves (``policy.pt``): every floating-point tensor and array, hashed one by one and combined as a
-sorted multiset, so renaming or regrouping the state does not change the hash, any changed value
-does. Run it before and after a change and compare:
+saves (the agent's state in ``checkpoint.pt``, written without the replay: what ``policy.pt`` held
+before it kept only what acting needs): every floating-point tensor and array, hashed one by one
+and combined as a sorted multiset, so renaming or regrouping the state does not change the hash,
+any changed value does. Run it before and after a change and compare:
 
     python -m benchmarks.weights_hash --name weights_hash_before
     python -m benchmarks.weights_hash --name weights_hash_after --compare weights_hash_before
@@ -167,6 +168,7 @@ def run_hash(name: str, root: Path, ignore: frozenset[str] = frozenset()) -> dic
         seed=3,
         total_steps=steps,
         run_dir=str(root / name),
+        save_replay=False,  # the checkpoint's agent state: what policy.pt held before
         progress=False,
         device="cpu",
         torch_threads=1,
@@ -176,7 +178,8 @@ def run_hash(name: str, root: Path, ignore: frozenset[str] = frozenset()) -> dic
         **values,
     )
     summary = train(cfg)
-    state = torch.load(root / name / "policy.pt", map_location="cpu", weights_only=False)
+    saved = torch.load(root / name / "checkpoint.pt", map_location="cpu", weights_only=False)
+    state = saved["agent"]
     digest, leaves = weights_hash(_drop(state, ignore))
     return {"sha256": digest, "tensors": leaves, "final_eval_return": summary["final_eval_return"]}
 

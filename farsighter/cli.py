@@ -40,7 +40,8 @@ commands:
             continue a run:   farsighter train --run-dir DIR --resume [--total-steps N]
             several seeds:    farsighter train --algo ddqn --seeds 1 2 3 4  (one process;
                               batched where the agent allows it, each seed its own run dir)
-  eval      evaluate a run:   farsighter eval RUN_DIR [--episodes 10]
+  eval      evaluate a run:   farsighter eval RUN_DIR [--episodes 10] [--seed S]
+            watch or record:  farsighter eval RUN_DIR --render human | --video DIR
   plot      draw a run's learning curve:  farsighter plot RUN_DIR
   presets   list the named presets and their sources
 """
@@ -76,6 +77,15 @@ class EvalArgs:
     """Seed of the evaluation environment."""
     device: str = "cpu"
     """cpu, cuda, cuda:N or auto."""
+    render: str = ""
+    """Render the episodes, one at a time: human (a window) or rgb_array (frames; what --video
+    records)."""
+    video: Annotated[str, tyro.conf.arg(metavar="DIR")] = ""
+    """Record every episode into DIR as an .mp4 (gymnasium's RecordVideo; needs moviepy: pip
+    install 'farsighter[video]')."""
+
+
+RENDER_MODES = ("human", "rgb_array")
 
 
 @dataclass(frozen=True)
@@ -183,15 +193,30 @@ def cmd_eval(argv: Sequence[str]) -> int:
     import numpy as np
 
     from farsighter.envs import make_eval_envs
+    from farsighter.envs.video import check_video, record_episodes
     from farsighter.session import EVAL_MAX_ENVS
     from farsighter.train import evaluate_episodes, load_agent
 
     args = tyro.cli(EvalArgs, args=list(argv), prog="farsighter eval")
     if args.episodes < 1:
         raise FarsighterError(f"--episodes must be >= 1 (got {args.episodes})")
+    if args.render and args.render not in RENDER_MODES:
+        raise ConfigError(f"unknown --render '{args.render}'; accepted: {', '.join(RENDER_MODES)}")
+    if args.video and args.render == "human":
+        raise ConfigError(
+            "--video records rgb_array frames and --render human shows a window; give one of them"
+        )
+    if args.video:
+        check_video()  # without moviepy: one line naming the extra, before anything is loaded
     policy = load_agent(args.run_dir, device=args.device)
     cfg = policy.config
-    envs = make_eval_envs(cfg, min(args.episodes, EVAL_MAX_ENVS), seed=args.seed)
+    if args.video or args.render:  # one environment that renders, its episodes in turn
+        env = policy.make_env(
+            seed=args.seed, render_mode="rgb_array" if args.video else args.render
+        )
+        envs = [record_episodes(env, args.video) if args.video else env]
+    else:
+        envs = make_eval_envs(cfg, min(args.episodes, EVAL_MAX_ENVS), seed=args.seed)
     try:
         result = evaluate_episodes(
             policy.agent, cfg, envs, args.episodes, args.seed, 0, progress=cfg.progress
@@ -209,6 +234,8 @@ def cmd_eval(argv: Sequence[str]) -> int:
     }
     if result.successes:  # goal-conditioned tasks report info["is_success"]
         report["success_rate"] = float(np.mean(result.successes))
+    if args.video:  # written as each episode ended, the last one on close
+        report["videos"] = sorted(str(p) for p in Path(args.video).glob("*.mp4"))
     print(jsonio.dumps(report))
     return 0
 

@@ -53,6 +53,7 @@ RESUMABLE_FIELDS = {
     "progress",
     "run_dir",
     "runtime.torch_threads",
+    "runtime.capture_video",
     "log_every",
     "checkpoint_every",
 }

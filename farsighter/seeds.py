@@ -34,6 +34,7 @@ from tqdm import tqdm
 from farsighter.agents import ddqn_seeds, farsighter_seeds, rnd_seeds
 from farsighter.config import Config, validate
 from farsighter.envs import check_spaces, make_vector_env
+from farsighter.envs.video import check_video
 from farsighter.errors import ConfigError
 from farsighter.interrupt import interrupted, requested
 from farsighter.replay import VectorStep
@@ -87,6 +88,8 @@ def train_seeds(
     for cfg in cfgs:
         check_same_run(cfg)
         validate(cfg)
+        if cfg.runtime.capture_video:
+            check_video("--capture-video")
     if len({cfg.seed for cfg in cfgs}) != len(cfgs):
         raise ConfigError("train_seeds takes each seed once")
     hooks = {cfg.seed: list(callbacks[i]) if callbacks else [] for i, cfg in enumerate(cfgs)}

@@ -24,10 +24,12 @@ from tqdm import tqdm
 from farsighter import jsonio
 from farsighter.agents import Agent
 from farsighter.config import Config
+from farsighter.envs.video import VIDEO_DIR, EvalVideo, eval_video
 from farsighter.errors import Diverged, EnvError, RunDirError
+from farsighter.policy_file import policy_state
 from farsighter.rundir import SUMMARY_FILE, RunLogger, load_checkpoint, save_checkpoint
 
-POLICY_FILE = "policy.pt"  # the trained agent without its replay, for acting
+POLICY_FILE = "policy.pt"  # what acting needs of the trained agent (farsighter.policy_file)
 CHECKPOINT_VERSION = 2  # 2: agents save their counters as one dataclass (v0.3)
 RECENT = 20  # episodes in the progress bar's and the summary's recent mean
 NO_EPISODE_NOTICE = 10_000  # steps without one ended episode after which the run says so, once
@@ -352,7 +354,7 @@ class RunLog:
     def __init__(self, path: Path, cfg: Config, state: LoopState, resumed: bool) -> None:
         self.path, self.cfg = path, cfg
         self.logger = RunLogger(path, resume_step=state.global_step if resumed else None)
-        self.eval_envs = _make_eval_envs(cfg)
+        self.eval_envs = _make_eval_envs(cfg, path)
         self.bar = tqdm(
             total=cfg.total_steps,
             initial=state.global_step,
@@ -442,9 +444,16 @@ class RunLog:
         cfg, log, step = self.cfg, self.logger, state.global_step
         state.evals += 1
         seed = cfg.seed + 7919 * state.evals
-        result = evaluate_episodes(
-            agent, cfg, self.eval_envs, cfg.eval_episodes, seed, step, progress=cfg.progress
-        )
+        video = self.eval_envs[0]
+        if isinstance(video, EvalVideo):  # --capture-video: this evaluation's first episode
+            video.arm(f"eval-step-{step}")
+        try:
+            result = evaluate_episodes(
+                agent, cfg, self.eval_envs, cfg.eval_episodes, seed, step, progress=cfg.progress
+            )
+        finally:
+            if isinstance(video, EvalVideo):
+                video.finish()
         mean, std = float(np.mean(result.returns)), float(np.std(result.returns))
         if result.successes:
             rate = float(np.mean(result.successes))
@@ -509,7 +518,7 @@ class RunLog:
             self.evaluate(state, agent)  # always finish with an evaluation
         self.logger.flush()
         save_run(self.path, cfg, state, agent, envs, obs)
-        torch.save(agent.state_dict(include_replay=False), self.path / POLICY_FILE)
+        torch.save(policy_state(agent, cfg.algo), self.path / POLICY_FILE)
         for callback in callbacks:
             callback.on_finish(self.path, agent)
 
@@ -591,8 +600,23 @@ def nothing_to_resume(cfg: Config, checkpoint: Mapping[str, Any]) -> dict[str, A
     return run_summary(cfg, path, LoopState.from_dict(checkpoint["loop"]))
 
 
-def _make_eval_envs(cfg: Config) -> list[gym.Env]:
+def _make_eval_envs(cfg: Config, path: Path) -> list[gym.Env]:
+    """The evaluation environments of a run; with ``capture_video`` the first renders frames and
+    records (:class:`~farsighter.envs.video.EvalVideo`) into ``path / videos``."""
     from farsighter.envs import make_eval_envs
 
     count = min(cfg.eval_episodes, EVAL_MAX_ENVS)
-    return make_eval_envs(cfg, count, seed=cfg.seed + 1_000_003)
+    envs = make_eval_envs(
+        cfg,
+        count,
+        seed=cfg.seed + 1_000_003,
+        render_mode="rgb_array" if cfg.runtime.capture_video else None,
+    )
+    if cfg.runtime.capture_video:
+        try:
+            envs[0] = eval_video(envs[0], path / VIDEO_DIR)
+        except BaseException:
+            for env in envs[1:]:
+                env.close()
+            raise
+    return envs

@@ -15,8 +15,10 @@ from farsighter.agents import Agent, build_agent
 from farsighter.agents.cuda_graph import check_compiler, graphs_enabled
 from farsighter.config import Config, load_config, validate
 from farsighter.envs import check_spaces, frame_stack_of, make_env, make_vector_env
+from farsighter.envs.video import check_video
 from farsighter.errors import ConfigError, RunDirError
 from farsighter.interrupt import interrupted, requested, stop_before_start
+from farsighter.policy_file import load_policy_state
 from farsighter.replay import VectorStep
 from farsighter.rundir import (
     CONFIG_FILE,
@@ -39,7 +41,15 @@ from farsighter.session import (
     restore_run,
 )
 
-__all__ = ["Callback", "EvalResult", "Policy", "evaluate_episodes", "load_agent", "train"]
+__all__ = [
+    "Callback",
+    "EvalResult",
+    "Policy",
+    "evaluate_episodes",
+    "load_agent",
+    "new_policy",
+    "train",
+]
 
 
 def resolve_device(name: str) -> torch.device:
@@ -100,6 +110,8 @@ def train(cfg: Config, callbacks: Sequence[Callback] = ()) -> dict[str, Any]:
     device = resolve_device(cfg.runtime.device)
     graphs_enabled(cfg.runtime.cuda_graph, device)  # cuda_graph on with no GPU: refused
     check_compiler(cfg.runtime.compile, device)  # compile on a CPU without a C++ compiler: refused
+    if cfg.runtime.capture_video:
+        check_video("--capture-video")  # without moviepy: refused before the run dir is touched
     checkpoint = None
     if cfg.resume:
         check_resume(cfg)  # a flag a resume may not change: refused before the checkpoint is read
@@ -157,38 +169,56 @@ def train(cfg: Config, callbacks: Sequence[Callback] = ()) -> dict[str, Any]:
 
 
 class Policy:
-    """A trained agent loaded from its run directory, for acting."""
+    """A trained agent loaded from its run directory, for acting. ``observation_space``: what
+    its environments (:meth:`make_env`) observe, when known."""
 
-    def __init__(self, agent: Agent, cfg: Config) -> None:
+    def __init__(
+        self, agent: Agent, cfg: Config, observation_space: gym.Space | None = None
+    ) -> None:
         self.agent, self.config = agent, cfg
+        self.observation_space = observation_space
 
     def act(self, obs: np.ndarray, deterministic: bool = True) -> np.ndarray:
-        """Actions for a batch of observations (greedy under the learned Q / posterior mean)."""
-        return self.agent.act(np.asarray(obs), 0, explore=not deterministic)
+        """Actions for a batch of observations: greedy under the learned Q / posterior mean, or
+        with ``deterministic=False`` the agent's exploration as at the end of training (a
+        Thompson draw from the posterior for the Bayesian agents, epsilon-greedy for DQN)."""
+        step = max(self.config.total_steps, self.config.learning_starts)
+        return self.agent.act(np.asarray(obs), step, explore=not deterministic)
 
-    def make_env(self, seed: int = 0, training: bool = False) -> gym.Env:
-        """An environment with the same preprocessing as training (evaluation flavour)."""
-        return make_env(self.config, seed=seed, training=training)
+    def make_env(
+        self, seed: int = 0, training: bool = False, render_mode: str | None = None
+    ) -> gym.Env:
+        """An environment with the same preprocessing as training (evaluation flavour);
+        ``render_mode`` (``rgb_array``, ``human``) is passed to ``gymnasium.make``."""
+        return make_env(self.config, seed=seed, training=training, render_mode=render_mode)
+
+
+def new_policy(cfg: Config, device: str = "cpu") -> Policy:
+    """An agent of ``cfg`` as built before training (untrained), for acting."""
+    env = make_env(cfg, seed=0)
+    try:
+        agent = build_agent(
+            cfg,
+            env.observation_space,
+            env.action_space,
+            frame_stack=frame_stack_of(cfg),
+            device=resolve_device(device),
+        )
+    finally:
+        env.close()
+    return Policy(agent, cfg, env.observation_space)
 
 
 def load_agent(run_dir: str | Path, device: str = "cpu") -> Policy:
-    """Load a trained agent from a run directory (``policy.pt``, else the last checkpoint)."""
+    """Load a trained agent from a run directory: ``policy.pt`` (what acting needs:
+    :mod:`farsighter.policy_file`), else the last checkpoint."""
     path = Path(run_dir)
     if not (path / CONFIG_FILE).exists():
         raise RunDirError(f"{path} holds no run (no {CONFIG_FILE})")
-    cfg = load_config(path / CONFIG_FILE)
-    env = make_env(cfg, seed=0)
-    agent = build_agent(
-        cfg,
-        env.observation_space,
-        env.action_space,
-        frame_stack=frame_stack_of(cfg),
-        device=resolve_device(device),
-    )
-    env.close()
+    policy = new_policy(load_config(path / CONFIG_FILE), device)
     if (path / POLICY_FILE).exists():
         state = torch.load(path / POLICY_FILE, map_location="cpu", weights_only=False)
+        load_policy_state(policy.agent, state)
     else:
-        state = load_checkpoint(path)["agent"]
-    agent.load_state_dict(state)
-    return Policy(agent, cfg)
+        policy.agent.load_state_dict(load_checkpoint(path)["agent"])
+    return policy

@@ -44,7 +44,7 @@ def rows(run_dir: Path) -> list[dict[str, str]]:
 
 
 def weights(run_dir: Path) -> dict[str, torch.Tensor]:
-    return torch.load(run_dir / "policy.pt", weights_only=False)["net"]
+    return torch.load(run_dir / "policy.pt", weights_only=False)["agent"]["net"]
 
 
 @pytest.mark.parametrize("algo", ["naf", "knaf", "bnaf", "farsighter-naf"])

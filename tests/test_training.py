@@ -26,7 +26,7 @@ def metric_rows(run_dir: Path) -> list[dict[str, str]]:
 
 
 def weights(run_dir: Path) -> dict[str, torch.Tensor]:
-    state = torch.load(run_dir / "policy.pt", weights_only=False)
+    state = torch.load(run_dir / "policy.pt", weights_only=False)["agent"]
     return state["q"] if "q" in state else state["torso"]
 
 

@@ -17,6 +17,7 @@ The pieces: :mod:`~farsighter.config.fields` (the dataclasses), :mod:`~farsighte
 """
 
 from farsighter.config.checks import STEP_AGENTS, validate
+from farsighter.config.env_ids import env_id_of, make_config
 from farsighter.config.fields import (
     AdaptiveKConfig,
     AtariConfig,
@@ -35,7 +36,6 @@ from farsighter.config.presets import (
     explain_config,
     is_atari_id,
     is_minatar_id,
-    make_config,
     resolve_preset_name,
 )
 
@@ -54,6 +54,7 @@ __all__ = [
     "config_from_dict",
     "config_layers",
     "config_to_dict",
+    "env_id_of",
     "explain_config",
     "is_atari_id",
     "is_minatar_id",

@@ -609,6 +609,12 @@ class RuntimeConfig:
     docs/design.md gives its speed."""
     torch_threads: int = 0
     """CPU threads for torch (0: torch's default)."""
+    capture_video: bool = False
+    """Record the first episode of each periodic evaluation (``eval_every``, and the final one)
+    as RUN_DIR/videos/eval-step-<step>.mp4, through Gymnasium's RecordVideo: the evaluation
+    environment renders rgb_array frames, which costs time on every step of that episode, and
+    holds them in memory until it ends. Needs moviepy (pip install 'farsighter[video]'). What
+    is learned does not change."""
 
     def checks(self) -> list[tuple[bool, str]]:
         """(holds, what was wrong and what is accepted) for each field of this section (which

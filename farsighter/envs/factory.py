@@ -164,15 +164,19 @@ def make_env(
     return env
 
 
-def make_eval_envs(cfg: Config, count: int, *, seed: int) -> list[gym.Env]:
+def make_eval_envs(
+    cfg: Config, count: int, *, seed: int, render_mode: str | None = None
+) -> list[gym.Env]:
     """``count`` evaluation environments, stepped as a batch by
     :func:`farsighter.session.evaluate_episodes`: each is ``make_env(training=False)`` (for ALE
     ids no life-loss terminals and unclipped rewards, always the Gymnasium wrappers), environment
-    ``i`` with its spaces seeded ``seed + i``. Each episode reseeds its environment on reset."""
+    ``i`` with its spaces seeded ``seed + i``. Each episode reseeds its environment on reset.
+    ``render_mode``: the first environment's (the one a video records)."""
     envs: list[gym.Env] = []
     try:
         for i in range(count):
-            envs.append(make_env(cfg, seed=seed + i, training=False))
+            mode = render_mode if i == 0 else None
+            envs.append(make_env(cfg, seed=seed + i, training=False, render_mode=mode))
     except BaseException:
         for env in envs:
             env.close()
