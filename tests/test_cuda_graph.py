@@ -100,11 +100,16 @@ def test_cuda_graph_setting_is_checked() -> None:
         validate(make_config("ob2i", "CartPole-v1", cuda_graph="on"))
     with pytest.raises(ConfigError, match="cuda_graph must be"):
         validate(make_config("ddqn", "CartPole-v1", cuda_graph="yes"))
-    # device auto: allowed, for a run that keeps its update's branch (the general preset's
-    # optimism until the first reward switches it: refused, not silently left eager)
+    # device auto: allowed, for a run that keeps its update's branch (optimism until the
+    # first reward switches it: refused, not silently left eager)
     validate(make_config("farsighter", "CartPole-v1", cuda_graph="on", blr__optimism="always"))
+    validate(make_config("farsighter", "CartPole-v1", cuda_graph="on"))  # the defaults
     with pytest.raises(ConfigError, match="does not combine with blr.optimism until-reward"):
-        validate(make_config("farsighter", "CartPole-v1", cuda_graph="on"))
+        validate(
+            make_config(
+                "farsighter", "CartPole-v1", cuda_graph="on", blr__optimism="until-reward"
+            )
+        )
     with pytest.raises(ConfigError, match="needs a CUDA device"):  # ... until it resolves to CPU
         graphs_enabled("on", torch.device("cpu"), supported=True)
     assert graphs_enabled("auto", torch.device("cpu"), supported=True) is False

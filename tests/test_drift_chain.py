@@ -36,7 +36,7 @@ def _train(
         run_dir=str(tmp_path / f"L{length}-s{seed}-{values.get('blr__switch_restart', 'default')}"),
         **values,
     )
-    assert cfg.preset == "general" and cfg.blr.optimism == "until-reward"
+    assert cfg.preset == "general"
     train_module.train(cfg)
     return json.loads((Path(cfg.run_dir) / "summary.json").read_text())
 

@@ -17,6 +17,7 @@ from farsighter.agents import farsighter_loss as farsighter_module
 from farsighter.agents.common import td_loss
 from farsighter.agents.farsighter import FarsighterAgent
 from farsighter.config import PRESETS, make_config, validate
+from farsighter.config.presets import PREVIOUS_GENERAL_FARSIGHTER
 from farsighter.envs import make_env
 from farsighter.envs.chain import ChainEnv, chain_id, drift_chain_id
 from farsighter.errors import ConfigError, EnvError
@@ -588,9 +589,9 @@ def test_auto_gives_discrete_tasks_the_general_preset_and_keeps_table_1_selectab
         100,
         "residual",
     )
-    assert (cfg.blr.target, cfg.blr.redraw, cfg.k_target, cfg.k) == ("sample", "k", "max", 10)
+    assert (cfg.blr.target, cfg.blr.redraw, cfg.k_target, cfg.k) == ("sample", "k", "k", 10)
     assert (cfg.blr.random_features, cfg.blr.data_weight) == (512, 100.0)
-    assert cfg.blr.random_features_max == 1024  # widened to the observation, up to 1,024
+    assert cfg.blr.center_sample and cfg.blr.random_features_max == 0
     assert make_config("bdqn", "farsighter/Chain10-v0").blr.random_features_max == 0
     assert make_config("bdqn", "farsighter/Chain10-v0").blr.data_weight == 1.0  # Farsighter's
     cartpole = make_config("farsighter", "CartPole-v1", preset="cartpole")  # as measured
@@ -625,21 +626,21 @@ def test_auto_gives_discrete_tasks_the_general_preset_and_keeps_table_1_selectab
     paper = make_config("farsighter", "farsighter/Chain10-v0", preset="control")
     assert tuple(getattr(paper, f) for f in learner[:5]) == ("rmsprop", 0.0025, 4, 32, 1_000)
     assert paper.sample_recent is True  # Algorithm 1 line 4 under the paper's presets
-    assert "general" in PRESETS and PRESETS["general"].per_algo["farsighter"]["k_target"] == "max"
-    # ... until the first positive reward, then the mean's target cut at exploratory actions
+    assert "general" in PRESETS and PRESETS["general"].per_algo["farsighter"]["k_target"] == "k"
+    # the chosen default sets none of session 45's other extensions (the suite's ablations)
     defaults = make_config("farsighter", "farsighter/Chain10-v0")
-    assert (defaults.blr.optimism, defaults.blr.calibrated_k_target) == ("until-reward", "cut")
     bdqn = make_config("bdqn", "farsighter/Chain10-v0")
     assert (bdqn.blr.optimism, bdqn.k_target) == ("always", "k")  # the baseline as it was
-    # acting draws widened to the action gaps, Farsighter's alone
-    assert (defaults.blr.act_width, bdqn.blr.act_width) == ("action-gap", "posterior")
-    # ... and the posterior refitted to the replay at the switch, Farsighter's alone
-    assert (defaults.blr.switch_restart, bdqn.blr.switch_restart) == ("refit-zero", "none")
-    # ... no draw for staying put, the cut past 3 steps of delay: Farsighter's alone
-    assert (defaults.blr.stay_optimism, bdqn.blr.stay_optimism) == (False, True)
-    assert (defaults.blr.cut_delay, bdqn.blr.cut_delay) == (3.0, 0.0)
-    assert (defaults.blr.advantage_learning, bdqn.blr.advantage_learning) == (0.9, 0.0)
-    assert (defaults.blr.revisit_action, bdqn.blr.revisit_action) == ("uniform-timeout", "draw")
+    assert (defaults.blr.optimism, defaults.blr.act_width) == ("always", "posterior")
+    assert (defaults.blr.switch_restart, defaults.blr.stay_optimism) == ("none", True)
+    assert (defaults.blr.advantage_learning, defaults.blr.revisit_action) == (0.0, "draw")
+    # session 45's default stays reachable by its overrides
+    previous = make_config("farsighter", "farsighter/Chain10-v0", **PREVIOUS_GENERAL_FARSIGHTER)
+    assert (previous.blr.optimism, previous.k_target, previous.blr.center_sample) == (
+        "until-reward",
+        "max",
+        False,
+    )
     control = make_config("farsighter", "CartPole-v1", preset="control")
     assert (control.blr.switch_restart, control.blr.optimism) == ("none", "always")
     assert make_config("farsighter", "CartPole-v1", preset="control").blr.act_width == "posterior"
@@ -946,11 +947,13 @@ def _chain8_runs(tmp_path: Path, variants: dict[str, dict], steps: int) -> dict[
 
 def test_stay_optimism_false_is_the_default_run_where_every_step_moves(tmp_path: Path) -> None:
     """On the chain every step moves the agent or ends the episode (no bootstrap), so a run with
-    blr.stay_optimism True is the default run (False) bit for bit (the general preset, 1,500
+    blr.stay_optimism True is session 45's default run (False) bit for bit (1,500
     steps, through its first reward and the switch)."""
     from tests.test_seeds import _files, _same_states
 
-    runs = _chain8_runs(tmp_path, {"plain": {}, "moves": {"blr__stay_optimism": True}}, 1_500)
+    old = PREVIOUS_GENERAL_FARSIGHTER  # session 45's default, whose switch this is
+    variants = {"plain": dict(old), "moves": {**old, "blr.stay_optimism": True}}
+    runs = _chain8_runs(tmp_path, variants, 1_500)
     assert runs["plain"]["calibrated"]  # it switched
     _same_states(runs["plain"], runs["moves"])
     assert _files(tmp_path / "plain") == _files(tmp_path / "moves")
@@ -1014,14 +1017,16 @@ def test_until_reward_then_cut_switches_the_replay_to_cut_windows(tmp_path: Path
 
 
 def test_until_reward_then_cut_is_the_default_run_until_the_first_reward(tmp_path: Path) -> None:
-    """Until its first positive reward a run with the default switch is the run without it,
+    """Until its first positive reward a run with session 45's switch is the run without it,
     bit for bit (it records its exploratory actions beside the same rows): the chain L = 8 pays
     nothing in the first 400 steps of seed 3."""
     from farsighter.replay.buffer import EXPLORATORY
     from tests.test_seeds import _files, _same_states
 
     # the defaults (switch): until-reward, then cut
-    runs = _chain8_runs(tmp_path, {"plain": {"blr__optimism": "always"}, "switch": {}}, 400)
+    old = PREVIOUS_GENERAL_FARSIGHTER  # session 45's default, whose switch this is
+    variants = {"plain": {**old, "blr.optimism": "always"}, "switch": dict(old)}
+    runs = _chain8_runs(tmp_path, variants, 400)
     assert runs["switch"].pop("calibrated") is False
     plain_replay, switch_replay = runs["plain"].pop("replay"), runs["switch"].pop("replay")
     _same_states(runs["plain"], runs["switch"])

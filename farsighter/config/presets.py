@@ -91,127 +91,54 @@ _FRESH_PER_ALGO: dict[str, dict[str, Any]] = {
     "bdqn": {"blr.redraw": "episode"},
     "farsighter": {"k_target": "max"},
 }
-# The general preset's, for Farsighter: minibatches from the whole replay, and a draw held for
-# the k steps of its target.
-# - Algorithm 1 line 4's latest-N window (500 transitions with this learner: 50 episodes of deep
-#   sea N = 10) forgets a rarely found reward within a few dozen episodes; on deep sea N = 14 the
-#   whole replay held the greedy solution in 1 of 2 seeds, the window in 0 of 2 (docs/design.md).
-# - A draw per step (Algorithm 2) dithers: on MountainCar-v0 its independent draws chose among
-#   actions whose posterior-mean gaps (0.03 on average) were below the draws' spread (0.03 to
-#   0.06), and no training episode reached the flag in 5 of 5 seeds x 75k steps. Held for k = 10
-#   steps the draw commits long enough to swing: 2 of 3 seeds solved it in 100k steps. A draw
-#   held per episode circles in MiniGrid until the time limit; held for k it is replaced every k
-#   steps.
-#   On deep sea (N = 10, 14), the 30-state chain, Acrobot and CartPole it did as well as a draw
-#   per step (docs/design.md "When to draw", docs/results/explore/redraw-*).
-# - The posterior over the learned features and 512 fixed random features of the observation
-#   (blr.random_features; flat observations): over the learned features alone its uncertainty
-#   was the same at every state of deep sea N = 20 (corr with log visits 0.015), with the random
-#   features it is wide where the run has not been (0.48 against 0.18; corr -0.77), and deep
-#   sea N = 10, 14 and 20 are solved in 5/5 seeds each (bsuite's criterion: 5/5, 5/5, 4/5),
-#   where the learned features alone solved N = 14 in 3/5 and N = 20 in 1/5
-#   (docs/design.md "Uncertainty about states", docs/results/explore/random-features*).
-# - Each minibatch row weighs 100 x train_every / batch_size in the incremental statistics
-#   (blr.data_weight; 1 counts a transition about once over its time in the replay): the mean
-#   learns a rarely seen reward from a few of its samples while the width where the run has not
-#   been stays the prior's. Deep sea N = 24 (72k steps, 5 seeds): solved 5/5 (bsuite 4/5), where
-#   the weight 1 solved 0/5; N = 10, 14, 20 solved 5/5, 5/5, 4/5 (bsuite 5/5, 5/5, 4/5; weight
-#   1: 5/5, 5/5, 5/5 and 5/5, 5/5, 4/5); FrozenLake 4x4 solved 5/5 (weight 1: 0/5); the
-#   30-state chain 5/5 in 657 episodes (1,008); MountainCar 3/3 in 25k steps (35k), Acrobot
-#   3/3 in 30k (15k) (docs/design.md "How much a sample weighs",
-#   docs/results/explore/dataweight-*).
-# - The random layer widens to the observation's entries, up to 1,024 (blr.random_features_max):
-#   W features give at most W directions, so past about W visited one-hot cells new ones stop
-#   looking new. Observations of at most 512 entries keep their 512 features bit for bit; deep
-#   sea N = 24 (576 wide) solved 5/5 (bsuite 5/5; 512 wide: 4/5), N = 30 (900 wide) 2/5 (bsuite
-#   2/5; 512 wide: 0/5) (docs/design.md "A random layer as wide as the observation",
-#   docs/results/explore/widen-deepsea).
-# - The draw in the targets and the max with the one-step target until the run's first positive
-#   reward, then the posterior mean's k-step target cut before the first exploratory action
-#   (blr.optimism until-reward, blr.calibrated_k_target cut): the upward bias that finds a lock
-#   paying only at its end is a bonus for not ending the episode, which makes stepping onto a
-#   goal that ends it the worst action (MiniGrid Empty-5x5: 0/3 with the bias for the whole run,
-#   3/3 with the switch); the cut keeps the found path where the k-step return of the acting
-#   policy forgets it (the chain L = 30 held 5/5, 1/5 with the plain k-step target after the
-#   switch). Deep sea N = 20 4/5 (bsuite 4/5) as before, FrozenLake 4x4 held 5/5 (2/5 before);
-#   a task that never pays a positive reward (Acrobot, MountainCar, deep sea until found) runs
-#   as it did, bit for bit (docs/design.md "Cut at the first exploratory action",
-#   docs/results/explore/until-reward-cut).
-# - The acting draws widened to the posterior mean's action gaps (blr.act_width action-gap: by
-#   the mean over recent states of the largest minus the smallest Q, over the prior sigma, when
-#   above 1): a draw spreads about the prior sigma, sized to the residual noise, and cannot
-#   reach across a penalty the values learned, so the penalised action is never tried where it
-#   pays. CliffWalking (-100 off the edge): no training episode reached the goal in 30k steps
-#   with the posterior's width (2 of 2 seeds), the optimal path (-13) by 20k steps widened
-#   (3 of 3 seeds);
-#   Taxi (-10 for a wrong pickup): no delivery in 60k steps, widened 1 and 7 (the targets
-#   kept at the switch; with the restart below 1 and 2). Where the gaps
-#   stay within the prior's width the run is the same, bit for bit (CartPole, Acrobot,
-#   FrozenLake, the 30-state chain, deep sea N = 20 and stochastic N = 10 measured)
-#   (docs/design.md "Draws as wide as the action gaps").
-# - At that switch the posterior restarts from its prior and is refitted to the replay
-#   (blr.switch_restart refit): every target it had summed carried the optimism, which the
-#   calibrated targets would work off at gamma per bootstrap, and where a wrong move revisits a
-#   state (the drifting lock, a wrong move one state back) the kept values rank the wrong move
-#   with the right one; restarted from the prior alone (session 37) it also drops the found
-#   path and explores afresh until the minibatches bring the reward back. The refit (fitted
-#   Q-iteration over the latest 50,000 rows, the calibrated targets) keeps what the rewards
-#   confirm, and is not kept where a target passes the largest reward sum the replay showed
-#   (Taxi: targets up to 46.7 against 20; the prior restart then). The drifting lock L = 10, 14,
-#   20: 5/5 each (kept: 0/5 at L = 10; DDQN 0/5); deep sea by bsuite's criterion N = 10, 14,
-#   20: 5/5, 5/5, 4/5 (the prior alone 4/5, 5/5, 3/5; kept 5/5, 4/5, 4/5); the chain L = 30,
-#   FrozenLake 4x4 and MiniGrid Empty-5x5 held 5/5 (docs/design.md "The drifting lock", "The
-#   posterior refitted at the switch"; docs/results/explore/guard-*).
-# - Where the fit is rejected, the rows kept without their targets (blr.switch_restart
-#   refit-zero) rather than the prior; no draw in a target whose window ends where it began
-#   (blr.stay_optimism False: a self-loop's draw adds its upward bias once per bootstrap, so
-#   staying put became the best action in a room); and after the switch a window cut only
-#   where the action taken costs more than 3 steps of delay (blr.cut_delay 3: a wrong turn in
-#   a room costs about 0.01 V, which cut every window to a step). MiniGrid DoorKey-5x5: 2/5
-#   solved and held within 100k steps, 0/5 without them (goals in training 5 to 765 against
-#   0 to 7); deep sea N = 10, 14, 20 by bsuite's criterion 5/5, 5/5, 4/5 and the drifting lock,
-#   the chain, FrozenLake 4x4 held as before (docs/design.md "The refit where it is sound, the
-#   targets zeroed where it is not"; docs/results/explore/refit-zero-*).
-# - After the switch, the targets under the advantage-learning operator (blr.advantage_learning
-#   0.9, Bellemare et al. 2016): a step that changes nothing (a pick up while carrying, a walk
-#   into a wall) costs (1 - gamma) V, about 0.007 in DoorKey-5x5, below the values' spread
-#   (about 0.02 at one sd), so the posterior mean's greedy policy repeated such a step to the
-#   time limit (0 of 10 evaluation episodes, where the draws reached the goal in 7); the
-#   operator widens those gaps tenfold. MiniGrid DoorKey-5x5: 5/5 solved and held within 100k
-#   steps (2/5 before); deep sea N = 10, 14, 20 by bsuite's criterion 5/5, 5/5, 4/5, the chain
-#   L = 5, 10, 30 and the drifting lock L = 10, 14, 20 5/5 held, as before (docs/design.md
-#   "Advantage learning after the switch"; docs/results/explore/advantage-*).
-# - A uniformly random action where an episode that follows one which ran to its time limit
-#   comes back to an observation it visited (blr.revisit_action uniform-timeout): the optimism
-#   lifts every value far above what the task pays before its first reward, the values then
-#   order the actions by more than the draws spread, and a draw acts like a fixed policy that
-#   walks the same loop whenever it comes back to a cell (a redraw from the narrow posterior
-#   repeats it). MiniGrid DoorKey-6x6: 3 of 5 seeds never reached the goal in 117k to 184k
-#   steps, where uniform actions reach it in 6% of episodes; with the rule every seed within
-#   6k steps, 3/5 solved and held within 80k. A loop never ends an episode; a goal, a hole or
-#   a fall does, so on FrozenLake 4x4 (holes end it) the rule rarely acts: 5/5 held in a median
-#   of 429 episodes (437 before), where a uniform action at every revisit there took 949.
-#   Observations that never repeat in an episode (continuous states, deep sea, the chain) run
-#   as before, bit for bit (docs/design.md "The search before the first reward";
-#   docs/results/explore/revisit-*).
+# The general preset's, for Farsighter: the paper's algorithm (BLR head, Thompson draws, its plain
+# k-step target) on the small-task learner, with four settings of ours, chosen on the exploration
+# suite's selection set and confirmed on its validation set (SPEC section 6;
+# farsighter/studies/suite.yaml; docs/design.md "How the defaults are chosen"; docs/results/suite):
+# - blr.random_features 512: the posterior over the learned features and 512 fixed random features
+#   of the observation, so that its width is larger where the run has not been (over the learned
+#   features alone it was the same at every state of deep sea).
+# - blr.data_weight 100: each minibatch row weighs 100 x train_every / batch_size in the
+#   incremental statistics, so the mean learns a rarely seen reward from a few of its samples.
+# - blr.redraw k: one draw held for the k steps of the k-step target (Algorithm 2 draws every step).
+# - blr.center_sample: the targets' draws less their minibatch's mean optimism, so a next state's
+#   draw raises its target by how much more uncertain it is than the minibatch's next states on
+#   average, and the states the run knows carry none (MiniGrid Empty-5x5: its goal in 2 of 301
+#   episodes without it, solved with it).
+# The k-step target is the paper's (k_target k). A draw in the target (blr.target sample, every
+# Bayesian agent's under this preset) adds its optimism once per bootstrap; bootstrapping every
+# k steps, that optimism compounds over 1 / (1 - gamma^k) (about 10) steps where the episode goes
+# on, instead of 1 / (1 - gamma) (100) with a target that bootstraps every step. The previous
+# default's larger of the k-step and the one-step target (k_target max), or a window cut at every
+# exploratory action (cut), bootstrapped every step: a known reward that ends the episode (the
+# distractor corridor, MiniGrid Empty-5x5, Acrobot's swing-up) or a small reward beside a large one
+# (RiverSwim) then lost to wandering.
 _GENERAL_PER_ALGO: dict[str, dict[str, Any]] = {
     **_FRESH_PER_ALGO,
     "farsighter": {
-        **_FRESH_PER_ALGO["farsighter"],
-        "sample_recent": False,
-        "blr.redraw": "k",
+        "sample_recent": False,  # the small-task learner: minibatches from the whole replay
         "blr.random_features": 512,
-        "blr.random_features_max": 1024,
         "blr.data_weight": 100.0,
-        "blr.optimism": "until-reward",
-        "blr.calibrated_k_target": "cut",
-        "blr.act_width": "action-gap",
-        "blr.switch_restart": "refit-zero",
-        "blr.stay_optimism": False,
-        "blr.cut_delay": 3.0,
-        "blr.advantage_learning": 0.9,
-        "blr.revisit_action": "uniform-timeout",
+        "blr.redraw": "k",
+        "k_target": "k",
+        "blr.center_sample": True,
     },
+}
+# The general preset's Farsighter before the defaults were chosen on the suite (session 45,
+# 005bab0): the options it set, for a comparison (`farsighter suite` agent "Farsighter
+# (session 45)") and for runs that must reproduce it.
+PREVIOUS_GENERAL_FARSIGHTER: dict[str, Any] = {
+    "k_target": "max",
+    "blr.random_features_max": 1024,
+    "blr.optimism": "until-reward",
+    "blr.calibrated_k_target": "cut",
+    "blr.act_width": "action-gap",
+    "blr.switch_restart": "refit-zero",
+    "blr.stay_optimism": False,
+    "blr.cut_delay": 3.0,
+    "blr.advantage_learning": 0.9,
+    "blr.revisit_action": "uniform-timeout",
+    "blr.center_sample": False,
 }
 # The cartpole preset's learning checks (tests/test_learning_slow.py) were measured with a draw
 # held per episode; kept so that they stay what was measured.
@@ -235,19 +162,14 @@ PRESETS: dict[str, Preset] = {
             "(Adam 1e-3, an update every 4 steps on 64 transitions from the whole replay, a "
             "target copy every 500 steps, 128 x 128) for every agent, with a posterior that "
             "stays fresh and scaled and whose uncertainty propagates, and (Farsighter) over "
-            "learned and 512 random features of the observation (as many as it has entries, up "
-            "to 1,024), each row weighing 100 times "
-            "its share in the statistics, with a draw held for the k steps of its target and "
-            "widened to the action gaps the values learned, and "
-            "optimistic targets until the run's first positive reward (then the posterior "
-            "refitted to the replay from its prior, and its mean's k-step target, cut before "
-            "the first exploratory action), so "
-            "that Thompson exploration works on tasks "
-            "nobody tuned it for (docs/results/explore). Reproduce "
+            "learned and 512 random features of the observation, each row weighing 100 times "
+            "its share in the statistics, a draw held for the k steps of its k-step target and "
+            "the targets' draws centred on their minibatch, chosen on the exploration suite's "
+            "selection set and confirmed on its validation set (farsighter suite). Reproduce "
             "the paper with --preset control or atari.",
             "Farsighter paper Table 1 (control column) for gamma and the BLR values; the "
             "learner and the posterior settings are ours, chosen on the exploration suite "
-            "(benchmarks/small_task_learner.py, farsighter explore)",
+            "(benchmarks/small_task_learner.py, farsighter suite; docs/results/suite)",
             {
                 **_CONTROL,
                 **_SMALL_TASK_LEARNER,
