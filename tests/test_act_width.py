@@ -11,6 +11,7 @@ import torch
 from farsighter import make_config, train
 from farsighter.agents.common import RecentRows
 from farsighter.agents.farsighter_posterior import FarsighterCounters, refresh_posterior
+from farsighter.config.presets import PREVIOUS_GENERAL_FARSIGHTER
 from farsighter.ops.blr import BLRHead, action_gap_scale
 
 
@@ -85,7 +86,8 @@ def test_a_refresh_sets_the_factor_from_the_recent_states(act_width: str) -> Non
 
 
 def test_the_defaults_widen_the_draws_where_a_penalty_opens_a_gap(tmp_path: Path) -> None:
-    """A default run on CliffWalking (-100 for a step off the edge, -1 otherwise): the values
+    """A run of session 45's default on CliffWalking (-100 for a step off the edge, -1 otherwise,
+    where the option was measured): the values
     learn a gap of tens between the cliff step and the others, and the acting draws widen with
     it; with the posterior's own width they do not."""
     scales = {}
@@ -97,7 +99,7 @@ def test_the_defaults_widen_the_draws_where_a_penalty_opens_a_gap(tmp_path: Path
             eval_every=0,
             progress=False,
             run_dir=str(tmp_path / width),
-            **{"blr.act_width": width},
+            **{**PREVIOUS_GENERAL_FARSIGHTER, "blr.act_width": width},
         )
         assert cfg.preset == "general" and cfg.blr.scale == "residual"
         train(cfg)

@@ -19,6 +19,7 @@ import pytest
 
 from farsighter.cli import main
 from farsighter.config import make_config
+from farsighter.config.presets import PREVIOUS_GENERAL_FARSIGHTER
 from farsighter.envs import make_env, make_vector_env
 from farsighter.envs.chain import chain_id, drift_chain_id
 from farsighter.envs.deep_sea import deep_sea_id
@@ -46,7 +47,7 @@ from farsighter.studies.explore import (
     run_config,
     tasks,
 )
-from farsighter.studies.runner import Job, load_runs, parse, settings_from, settings_of
+from farsighter.studies.runner import Agent, Job, load_runs, parse, settings_from, settings_of
 
 
 def test_family_table() -> None:
@@ -302,7 +303,7 @@ def test_agents_are_one_config_each_on_the_auto_preset(tmp_path: Path) -> None:
         by["Farsighter (mean, k-step target)"], QUICK, 3, tmp_path, (chain_id(10), 1)
     )
     assert (mean_k.blr.target, mean_k.k_target) == ("mean", "k")
-    assert (every[3].blr.target, every[3].k_target) == ("sample", "max")  # the default's
+    assert (every[3].blr.target, every[3].k_target) == ("sample", "k")  # the default's
     assert (
         every[3].blr.random_features == 512
     )  # the default's: the posterior over random features too
@@ -310,12 +311,15 @@ def test_agents_are_one_config_each_on_the_auto_preset(tmp_path: Path) -> None:
     weight_100 = run_config(
         by["Farsighter (data weight 100)"], QUICK, 3, tmp_path, (chain_id(10), 10_000)
     )
-    assert dataclasses.replace(weight_100, run_dir="") == dataclasses.replace(every[3], run_dir="")
+    # the named variants change session 45's default (their base), not today's
+    session45 = Agent("Farsighter (session 45)", "farsighter", dict(PREVIOUS_GENERAL_FARSIGHTER))
+    previous = run_config(session45, QUICK, 3, tmp_path, (chain_id(10), 10_000))
+    assert dataclasses.replace(weight_100, run_dir="") == dataclasses.replace(previous, run_dir="")
     switch = run_config(
         by["Farsighter (optimism until reward, then cut)"], QUICK, 3, tmp_path, (chain_id(10), 1)
     )
     assert (switch.blr.optimism, switch.blr.calibrated_k_target) == ("until-reward", "cut")
-    default = run_config(by["Farsighter"], QUICK, 3, tmp_path, (chain_id(10), 1))
+    default = run_config(session45, QUICK, 3, tmp_path, (chain_id(10), 1))
     # session 39's defaults: the default but for the prior where the refit is rejected, the
     # draw for staying put, the cut at every exploratory action, no advantage learning and the
     # draw's action at every revisit
@@ -388,8 +392,10 @@ def test_agents_are_one_config_each_on_the_auto_preset(tmp_path: Path) -> None:
     ]
     assert len({repr(dataclasses.replace(c, run_dir="")) for c in configs}) == len(configs)
     assert by["Farsighter"].overrides == {} and by["DDQN"].overrides == {}
-    assert by["Farsighter (redraw k)"].overrides == {"blr.redraw": "k"}
+    base = PREVIOUS_GENERAL_FARSIGHTER
+    assert by["Farsighter (redraw k)"].overrides == {**base, "blr.redraw": "k"}
     assert by["Farsighter (centred draw)"].overrides == {
+        **base,
         "blr.center_sample": True,
         "blr.optimism": "always",
     }
@@ -397,13 +403,13 @@ def test_agents_are_one_config_each_on_the_auto_preset(tmp_path: Path) -> None:
     assert (fourier.blr.random_features_kind, fourier.blr.random_features) == ("fourier", 512)
     fixed = run_config(by["Farsighter (fixed width)"], QUICK, 3, tmp_path, (chain_id(10), 1))
     assert (fixed.blr.random_features, fixed.blr.random_features_max) == (512, 0)
-    assert every[3].blr.random_features_max == 1024  # the default's
+    assert previous.blr.random_features_max == 1024  # session 45's default's
     cfg = run_config(by["Farsighter (redraw step)"], QUICK, 3, tmp_path, (chain_id(10), 10_000))
     assert cfg == make_config(
         "farsighter",
         chain_id(10),
         preset="auto",
-        **{"blr.redraw": "step"},
+        **{**base, "blr.redraw": "step"},
         seed=3,
         total_steps=10_000,
         eval_every=100,

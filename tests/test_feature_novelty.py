@@ -36,9 +36,9 @@ def test_a_run_is_told_when_its_observation_outgrows_the_random_layer() -> None:
 
 
 def test_the_random_layer_widens_to_the_observation_up_to_its_cap() -> None:
-    """blr.random_features_max: the general preset's layer is as wide as a one-hot observation
-    has entries (deep sea N = 30: 900 cells), never narrower than random_features, never wider
-    than the cap; 0 keeps the fixed width, and no random features stays none."""
+    """blr.random_features_max: the layer is as wide as a one-hot observation has entries (deep
+    sea N = 30: 900 cells), never narrower than random_features, never wider than the cap; 0
+    keeps the fixed width (the general preset's), and no random features stays none."""
     import gymnasium as gym
 
     from farsighter.agents.farsighter_posterior import seeded_torso
@@ -51,7 +51,9 @@ def test_the_random_layer_widens_to_the_observation_up_to_its_cap() -> None:
     assert widths == [512, 512, 576, 900, 1024, 1024]
     assert BLRConfig(random_features=512).random_feature_width(900) == 512  # no cap: fixed
     assert BLRConfig(random_features_max=1024).random_feature_width(900) == 0  # none stays none
-    cfg = make_config("farsighter", "farsighter/DeepSea30-v0", hidden_sizes=(8,))
+    cfg = make_config(
+        "farsighter", "farsighter/DeepSea30-v0", hidden_sizes=(8,), blr__random_features_max=1024
+    )
     space = gym.spaces.Box(0.0, 1.0, (900,), dtype=np.float32)
     torso, init_AD = seeded_torso(cfg, space, 2)
     assert isinstance(torso, RandomFeatureTorso) and torso.width == 900

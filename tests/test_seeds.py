@@ -20,6 +20,7 @@ import torch.nn.functional as F
 
 from farsighter.agents import farsighter_seeds
 from farsighter.cli import main
+from farsighter.config.presets import PREVIOUS_GENERAL_FARSIGHTER
 from farsighter.errors import ConfigError
 from farsighter.replay import ReplayBuffer
 from farsighter.replay.seeds import SeedReplay
@@ -28,6 +29,8 @@ from farsighter.stacked import stacked_linear
 from farsighter.train import train
 
 SEEDS = (3, 5, 8)
+S45 = {key.replace(".", "__"): value for key, value in PREVIOUS_GENERAL_FARSIGHTER.items()}
+"""Session 45's general Farsighter (its switch at the first reward), which the switch cases use."""
 
 
 def _files(run: Path) -> dict[str, list[str]]:
@@ -103,6 +106,7 @@ def _files(run: Path) -> dict[str, list[str]]:
             "farsighter",
             "farsighter/Chain8-v0",
             {
+                **S45,
                 "preset": "general",
                 "blr__optimism": "until-reward",
                 "blr__calibrated_k_target": "cut",
@@ -120,6 +124,7 @@ def _files(run: Path) -> dict[str, list[str]]:
             "farsighter",
             "farsighter/Chain8-v0",
             {
+                **S45,
                 "preset": "general",
                 "blr__switch_restart": "refit",
                 "k": 3,
@@ -132,6 +137,7 @@ def _files(run: Path) -> dict[str, list[str]]:
             "farsighter",
             "farsighter/Chain8-v0",
             {
+                **S45,
                 "preset": "general",
                 "blr__switch_restart": "refit-zero",
                 "blr__advantage_learning": 0.9,
@@ -155,6 +161,9 @@ def _files(run: Path) -> dict[str, list[str]]:
             "farsighter/DeepSea6-v0",
             {"preset": "general", "k_target": "cut", "k": 3, "blr__cut_delay": 2.0},
         ),
+        # the general preset's default: the plain k-step target, the targets' draws centred on
+        # each seed's own minibatch
+        ("farsighter", "farsighter/DeepSea6-v0", {"preset": "general", "k": 3, "batch_size": 24}),
         # RND: each seed's bonus (its networks, Adam, whitening and reward statistics)
         ("rnd", "CartPole-v1", {"preset": "general"}),
         # k-step intrinsic returns over windows cut by episode ends, two envs a seed

@@ -28,6 +28,7 @@ from typing import Annotated, Any, Literal
 import numpy as np
 
 from farsighter.config import Config
+from farsighter.config.presets import PREVIOUS_GENERAL_FARSIGHTER
 from farsighter.envs.chain import SOLVED_RETURN, chain_id, drift_chain_id
 from farsighter.envs.deep_sea import deep_sea_id
 from farsighter.errors import FarsighterError
@@ -563,6 +564,16 @@ AGENTS: tuple[Agent, ...] = (
         "farsighter",
         {"blr.revisit_action": "uniform-timeout"},
     ),
+)
+# Every named Farsighter variant was measured as a change of the general preset's Farsighter of
+# session 45 (docs/results/explore), and is kept as that change: its base is that default
+# (PREVIOUS_GENERAL_FARSIGHTER), so a label still names the config its results were made with.
+# "Farsighter" alone is the library's default.
+AGENTS = tuple(
+    Agent(a.label, a.algo, {**PREVIOUS_GENERAL_FARSIGHTER, **a.overrides})
+    if a.label.startswith("Farsighter (")
+    else a
+    for a in AGENTS
 )
 COLORS = {a.label: f"C{i}" for i, a in enumerate(AGENTS)}
 _NAMED_ONLY = (
