@@ -29,11 +29,14 @@ from farsighter.model import (
     Model,
     make,
 )
+from farsighter.session import BaseCallback, Callback
 from farsighter.train import load_agent, train
 
 __all__ = [
     "BDQN",
     "BNAF",
+    "BaseCallback",
+    "Callback",
     "DDQN",
     "KDDQN",
     "KNAF",

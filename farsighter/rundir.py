@@ -6,14 +6,18 @@ import csv
 import os
 import shutil
 import time
+from collections.abc import Sequence
 from pathlib import Path
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 import torch
 
 from farsighter.config import Config, load_config, save_config
 from farsighter.config.presets import flat_fields, with_values
 from farsighter.errors import RunDirError
+
+if TYPE_CHECKING:
+    from farsighter.tracking import Tracker
 
 CONFIG_FILE = "config.json"
 CHECKPOINT_FILE = "checkpoint.pt"
@@ -54,6 +58,9 @@ RESUMABLE_FIELDS = {
     "run_dir",
     "runtime.torch_threads",
     "runtime.capture_video",
+    "runtime.track",
+    "runtime.wandb_project",
+    "runtime.wandb_entity",
     "log_every",
     "checkpoint_every",
 }
@@ -239,9 +246,13 @@ class RunLogger:
     """Metrics CSV, evaluation CSV and TensorBoard events under fixed namespaces
     (``charts/``, ``losses/``, ``eval/``), reopened consistently on resume. Rows and scalars are
     held and written out together every :data:`FLUSH_SECONDS` and at :meth:`flush` (each
-    scalar with the wall time it was logged at)."""
+    scalar with the wall time it was logged at). ``trackers`` (:mod:`farsighter.tracking`:
+    Weights & Biases, the callbacks' ``on_scalar``) get the same scalars at each flush, and
+    the videos given to :meth:`video`; :meth:`close` ends them."""
 
-    def __init__(self, path: Path, resume_step: int | None) -> None:
+    def __init__(
+        self, path: Path, resume_step: int | None, trackers: Sequence[Tracker] = ()
+    ) -> None:
         from torch.utils.tensorboard import SummaryWriter
 
         if resume_step is not None:
@@ -255,6 +266,7 @@ class RunLogger:
         self.tb = SummaryWriter(str(path), purge_step=resume_step)
         self._scalars: list[tuple[str, float, int, float]] = []
         self._flushed = time.monotonic()
+        self.trackers = list(trackers)
 
     def scalar(self, tag: str, value: float, step: int) -> None:
         self._scalars.append((tag, value, step, time.time()))
@@ -266,11 +278,22 @@ class RunLogger:
         then every file flushed."""
         for tag, value, step, walltime in self._scalars:
             self.tb.add_scalar(tag, value, step, walltime=walltime)
+        held = [(tag, value, step) for tag, value, step, _ in self._scalars]
         self._scalars.clear()
+        for tracker in self.trackers if held else ():
+            tracker.scalars(held)
         for log in (self.metrics, self.eval, *self._success.values()):
             log.flush()
         self.tb.flush()
         self._flushed = time.monotonic()
+
+    def video(self, tag: str, file: Path, step: int) -> None:
+        """An .mp4 written at ``step``, for the trackers (TensorBoard keeps scalars only), after
+        the scalars logged before it."""
+        if self.trackers:
+            self.flush()
+        for tracker in self.trackers:
+            tracker.video(tag, file, step)
 
     def success(self, row: dict[str, Any], evaluation: bool = False) -> None:
         """A row of success.csv (training episodes) or eval_success.csv (evaluation phases)."""
@@ -283,10 +306,19 @@ class RunLogger:
             self._success[name] = CsvLog(self.path / name, columns)
         self._success[name].write(row)
 
-    def close(self) -> None:
-        self.flush()
-        self.metrics.close()
-        self.eval.close()
-        for log in self._success.values():
-            log.close()
-        self.tb.close()
+    def close(self, failed: bool = False) -> None:
+        """Flush and close the files, then end the trackers: ``failed`` when the run stops
+        before its end (an error, a signal)."""
+        try:
+            self.flush()
+        except BaseException:
+            failed = True
+            raise
+        finally:
+            self.metrics.close()
+            self.eval.close()
+            for log in self._success.values():
+                log.close()
+            self.tb.close()
+            for tracker in self.trackers:
+                tracker.close(failed)

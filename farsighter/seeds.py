@@ -48,6 +48,7 @@ from farsighter.session import (
     final_observations,
     restore_run,
 )
+from farsighter.tracking import check_tracking
 from farsighter.train import resolve_device, train
 
 __all__ = ["BATCHED", "batchable", "seed_configs", "train_seeds"]
@@ -90,6 +91,7 @@ def train_seeds(
         validate(cfg)
         if cfg.runtime.capture_video:
             check_video("--capture-video")
+        check_tracking(cfg)
     if len({cfg.seed for cfg in cfgs}) != len(cfgs):
         raise ConfigError("train_seeds takes each seed once")
     hooks = {cfg.seed: list(callbacks[i]) if callbacks else [] for i, cfg in enumerate(cfgs)}
@@ -172,14 +174,19 @@ def _train_batch(
     batch = BATCHED[cfg.algo].SeedBatch(cfgs, obs_space, act_space, device=device)
     members = [batch.member(s) for s in range(len(cfgs))]
     runs: list[_Seed] = []
-    for c, path, env, member, hooks in zip(cfgs, paths, envs, members, callbacks, strict=True):
-        if c.resume:
-            state, env, obs = restore_run(path, c, member, env)
-        else:
-            state, (obs, _) = LoopState(), env.reset(seed=c.seed)
-        quiet = dataclasses.replace(c, progress=False)  # one bar for the batch, below
-        log = RunLog(path, quiet, state, resumed=c.resume)
-        runs.append(_Seed(c, path, env, obs, state, log, hooks))
+    try:
+        for c, path, env, member, hooks in zip(cfgs, paths, envs, members, callbacks, strict=True):
+            if c.resume:
+                state, env, obs = restore_run(path, c, member, env)
+            else:
+                state, (obs, _) = LoopState(), env.reset(seed=c.seed)
+            quiet = dataclasses.replace(c, progress=False)  # one bar for the batch, below
+            log = RunLog(path, quiet, state, resumed=c.resume, callbacks=hooks)
+            runs.append(_Seed(c, path, env, obs, state, log, hooks))
+    except BaseException:  # the logs opened so far (their W&B runs) closed as failed
+        for run in runs:
+            run.log.close()
+        raise
     step = runs[0].state.global_step
     bar = tqdm(
         total=cfg.total_steps * len(runs),

@@ -28,6 +28,7 @@ from farsighter.envs.video import VIDEO_DIR, EvalVideo, eval_video
 from farsighter.errors import Diverged, EnvError, RunDirError
 from farsighter.policy_file import policy_state
 from farsighter.rundir import SUMMARY_FILE, RunLogger, load_checkpoint, save_checkpoint
+from farsighter.tracking import VIDEO_TAG, run_trackers
 
 POLICY_FILE = "policy.pt"  # what acting needs of the trained agent (farsighter.policy_file)
 CHECKPOINT_VERSION = 2  # 2: agents save their counters as one dataclass (v0.3)
@@ -36,11 +37,41 @@ NO_EPISODE_NOTICE = 10_000  # steps without one ended episode after which the ru
 
 
 class Callback(Protocol):
-    """Observes a run without changing it (studies use it to record what the loop does not)."""
+    """Observes a training run without changing it: ``farsighter.train(cfg, callbacks=[...])``
+    (:func:`farsighter.seeds.train_seeds` takes one list per seed; studies use them to record
+    what the loop does not).
+
+    * ``on_step(global_step, info, agent)``: after every vector step, before its episodes are
+      logged. ``global_step`` counts environment steps summed over the vector environments;
+      ``info`` is the vector environment's info dict (``info["final_info"]["episode"]`` holds
+      the episodes that ended); ``agent`` is read-only by contract.
+    * ``on_finish(run_dir, agent)``: once, after the final evaluation, checkpoint and policy
+      file (not for a run that stops early).
+    * optionally ``on_scalar(tag, value, step)``: every scalar the run writes to TensorBoard,
+      with its tag and step (``charts/episodic_return``, ``losses/td_loss``,
+      ``eval/mean_return``, ...), in the order logged, delivered when the logs are written out
+      (at least every 2 seconds, before each checkpoint, and all of them before ``on_finish``).
+      A resume delivers again what was logged after its checkpoint.
+
+    :class:`BaseCallback` has each hook do nothing: subclass it and override what you need."""
 
     def on_step(self, global_step: int, info: dict[str, Any], agent: Agent) -> None: ...
 
     def on_finish(self, run_dir: Path, agent: Agent) -> None: ...
+
+
+class BaseCallback:
+    """A :class:`Callback` whose hooks do nothing, ``on_scalar`` included: override those you
+    need."""
+
+    def on_step(self, global_step: int, info: dict[str, Any], agent: Agent) -> None:
+        """After every vector step (:class:`Callback`)."""
+
+    def on_finish(self, run_dir: Path, agent: Agent) -> None:
+        """Once, at the end of a run that finished (:class:`Callback`)."""
+
+    def on_scalar(self, tag: str, value: float, step: int) -> None:
+        """Each scalar the run writes to TensorBoard (:class:`Callback`)."""
 
 
 @dataclass
@@ -349,12 +380,30 @@ def no_episode_notice(cfg: Config, step: int) -> str:
 
 class RunLog:
     """Episode rows, log-interval scalars (SPS, loss, diagnostics), evaluations, the progress
-    bar and the summary of one run; reopened consistently on resume."""
+    bar and the summary of one run; reopened consistently on resume. Its scalars also reach the
+    ``on_scalar`` hooks of ``callbacks`` and, with ``track``, Weights & Biases
+    (:mod:`farsighter.tracking`)."""
 
-    def __init__(self, path: Path, cfg: Config, state: LoopState, resumed: bool) -> None:
+    def __init__(
+        self,
+        path: Path,
+        cfg: Config,
+        state: LoopState,
+        resumed: bool,
+        callbacks: Sequence[Callback] = (),
+    ) -> None:
         self.path, self.cfg = path, cfg
-        self.logger = RunLogger(path, resume_step=state.global_step if resumed else None)
-        self.eval_envs = _make_eval_envs(cfg, path)
+        self.finished = False  # set at the end of finish(): a run closed before is not
+        self.logger = RunLogger(
+            path,
+            resume_step=state.global_step if resumed else None,
+            trackers=run_trackers(cfg, path, resumed, callbacks),
+        )
+        try:
+            self.eval_envs = _make_eval_envs(cfg, path)
+        except BaseException:
+            self.logger.close(failed=True)
+            raise
         self.bar = tqdm(
             total=cfg.total_steps,
             initial=state.global_step,
@@ -444,9 +493,9 @@ class RunLog:
         cfg, log, step = self.cfg, self.logger, state.global_step
         state.evals += 1
         seed = cfg.seed + 7919 * state.evals
-        video = self.eval_envs[0]
+        video, name = self.eval_envs[0], f"eval-step-{step}"
         if isinstance(video, EvalVideo):  # --capture-video: this evaluation's first episode
-            video.arm(f"eval-step-{step}")
+            video.arm(name)
         try:
             result = evaluate_episodes(
                 agent, cfg, self.eval_envs, cfg.eval_episodes, seed, step, progress=cfg.progress
@@ -454,6 +503,9 @@ class RunLog:
         finally:
             if isinstance(video, EvalVideo):
                 video.finish()
+        file = self.path / VIDEO_DIR / f"{name}.mp4"
+        if isinstance(video, EvalVideo) and file.is_file():  # for the trackers (W&B)
+            log.video(VIDEO_TAG, file, step)
         mean, std = float(np.mean(result.returns)), float(np.std(result.returns))
         if result.successes:
             rate = float(np.mean(result.successes))
@@ -521,6 +573,7 @@ class RunLog:
         torch.save(policy_state(agent, cfg.algo), self.path / POLICY_FILE)
         for callback in callbacks:
             callback.on_finish(self.path, agent)
+        self.finished = True
 
     def end_of_training(self) -> None:
         """Marks the end of the steps (the final evaluation and checkpoint do not count in SPS)."""
@@ -547,10 +600,14 @@ class RunLog:
         return summary
 
     def close(self) -> None:
+        """The bar, the logs and the trackers (a W&B run ends as failed unless :meth:`finish`
+        completed), and the evaluation environments."""
         self.bar.close()
-        self.logger.close()
-        for env in self.eval_envs:
-            env.close()
+        try:
+            self.logger.close(failed=not self.finished)
+        finally:
+            for env in self.eval_envs:
+                env.close()
 
 
 def run_summary(cfg: Config, path: Path, state: LoopState) -> dict[str, Any]:

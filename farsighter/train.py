@@ -30,6 +30,7 @@ from farsighter.rundir import (
 from farsighter.runtime import prepare_process
 from farsighter.session import (
     POLICY_FILE,
+    BaseCallback,
     Callback,
     EvalResult,
     LoopState,
@@ -40,8 +41,10 @@ from farsighter.session import (
     nothing_to_resume,
     restore_run,
 )
+from farsighter.tracking import check_tracking
 
 __all__ = [
+    "BaseCallback",
     "Callback",
     "EvalResult",
     "Policy",
@@ -101,7 +104,8 @@ def random_features_note(width: int, obs_shape: tuple[int, ...], env: str) -> st
 def train(cfg: Config, callbacks: Sequence[Callback] = ()) -> dict[str, Any]:
     """Train ``cfg.algo`` on ``cfg.env``; returns the run's summary (also in summary.json).
 
-    ``callbacks`` see every vector step's ``info`` and the agent, read-only by contract. A
+    ``callbacks`` (:class:`Callback`) see every vector step's ``info`` and the agent, read-only
+    by contract, and with an ``on_scalar`` hook every scalar written to TensorBoard. A
     resume to no more steps than were done changes nothing (:func:`nothing_to_resume`). Inside
     :func:`farsighter.interrupt.stop_on_signal`, SIGINT or SIGTERM ends the step, saves a
     checkpoint and raises :class:`~farsighter.errors.Interrupted`."""
@@ -112,6 +116,7 @@ def train(cfg: Config, callbacks: Sequence[Callback] = ()) -> dict[str, Any]:
     check_compiler(cfg.runtime.compile, device)  # compile on a CPU without a C++ compiler: refused
     if cfg.runtime.capture_video:
         check_video("--capture-video")  # without moviepy: refused before the run dir is touched
+    check_tracking(cfg)  # --track without wandb: the same
     checkpoint = None
     if cfg.resume:
         check_resume(cfg)  # a flag a resume may not change: refused before the checkpoint is read
@@ -140,7 +145,7 @@ def train(cfg: Config, callbacks: Sequence[Callback] = ()) -> dict[str, Any]:
     else:
         state, (obs, _) = LoopState(), envs.reset(seed=cfg.seed)
     async_envs: Any = envs  # with overlap: step_async / step_wait (overlap_enabled checked them)
-    log = RunLog(path, cfg, state, resumed=cfg.resume)
+    log = RunLog(path, cfg, state, resumed=cfg.resume, callbacks=callbacks)
     try:
         while state.global_step < cfg.total_steps:
             actions = agent.act(obs, state.global_step)

@@ -615,6 +615,16 @@ class RuntimeConfig:
     environment renders rgb_array frames, which costs time on every step of that episode, and
     holds them in memory until it ends. Needs moviepy (pip install 'farsighter[video]'). What
     is learned does not change."""
+    track: bool = False
+    """Log the run to Weights & Biases as well (CleanRL's ``--track``): every scalar written to
+    TensorBoard, with the same tags against a ``global_step`` axis, the resolved config, and with
+    capture_video each evaluation's video. W&B's files go to RUN_DIR/wandb (``WANDB_MODE=offline``
+    keeps them there, for a later ``wandb sync``); a resume continues the same W&B run. Needs
+    wandb (pip install 'farsighter[track]'). What is learned does not change."""
+    wandb_project: str = "farsighter"
+    """W&B project of a tracked run (``track``)."""
+    wandb_entity: str = ""
+    """W&B entity (user or team) of a tracked run; empty: W&B's default entity."""
 
     def checks(self) -> list[tuple[bool, str]]:
         """(holds, what was wrong and what is accepted) for each field of this section (which
