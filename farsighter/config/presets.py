@@ -93,7 +93,7 @@ _FRESH_PER_ALGO: dict[str, dict[str, Any]] = {
 }
 # The general preset's, for Farsighter: the paper's algorithm (BLR head, Thompson draws, its plain
 # k-step target) on the small-task learner, with four settings of ours, chosen on the exploration
-# suite's selection set and confirmed on its validation set (SPEC section 6;
+# suite's selection set and checked on its validation set (SPEC section 6;
 # farsighter/studies/suite.yaml; docs/design.md "How the defaults are chosen"; docs/results/suite):
 # - blr.random_features 512: the posterior over the learned features and 512 fixed random features
 #   of the observation, so that its width is larger where the run has not been (over the learned
@@ -165,7 +165,7 @@ PRESETS: dict[str, Preset] = {
             "learned and 512 random features of the observation, each row weighing 100 times "
             "its share in the statistics, a draw held for the k steps of its k-step target and "
             "the targets' draws centred on their minibatch, chosen on the exploration suite's "
-            "selection set and confirmed on its validation set (farsighter suite). Reproduce "
+            "selection set and checked on its validation set (farsighter suite). Reproduce "
             "the paper with --preset control or atari.",
             "Farsighter paper Table 1 (control column) for gamma and the BLR values; the "
             "learner and the posterior settings are ours, chosen on the exploration suite "
