@@ -34,7 +34,6 @@ from tqdm import tqdm
 from farsighter.agents import ddqn_seeds, farsighter_seeds, rnd_seeds
 from farsighter.config import Config, validate
 from farsighter.envs import check_spaces, make_vector_env
-from farsighter.envs.video import check_video
 from farsighter.errors import ConfigError
 from farsighter.interrupt import interrupted, requested
 from farsighter.replay import VectorStep
@@ -48,8 +47,7 @@ from farsighter.session import (
     final_observations,
     restore_run,
 )
-from farsighter.tracking import check_tracking
-from farsighter.train import resolve_device, train
+from farsighter.train import check_extras, resolve_device, train
 
 __all__ = ["BATCHED", "batchable", "seed_configs", "train_seeds"]
 
@@ -89,9 +87,7 @@ def train_seeds(
     for cfg in cfgs:
         check_same_run(cfg)
         validate(cfg)
-        if cfg.runtime.capture_video:
-            check_video("--capture-video")
-        check_tracking(cfg)
+        check_extras(cfg)
     if len({cfg.seed for cfg in cfgs}) != len(cfgs):
         raise ConfigError("train_seeds takes each seed once")
     hooks = {cfg.seed: list(callbacks[i]) if callbacks else [] for i, cfg in enumerate(cfgs)}

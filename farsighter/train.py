@@ -101,6 +101,14 @@ def random_features_note(width: int, obs_shape: tuple[int, ...], env: str) -> st
     return None
 
 
+def check_extras(cfg: Config) -> None:
+    """The optional packages a run's flags need, refused in one line before the run directory is
+    touched: moviepy for --capture-video, wandb for --track."""
+    if cfg.runtime.capture_video:
+        check_video("--capture-video")
+    check_tracking(cfg)
+
+
 def train(cfg: Config, callbacks: Sequence[Callback] = ()) -> dict[str, Any]:
     """Train ``cfg.algo`` on ``cfg.env``; returns the run's summary (also in summary.json).
 
@@ -114,9 +122,7 @@ def train(cfg: Config, callbacks: Sequence[Callback] = ()) -> dict[str, Any]:
     device = resolve_device(cfg.runtime.device)
     graphs_enabled(cfg.runtime.cuda_graph, device)  # cuda_graph on with no GPU: refused
     check_compiler(cfg.runtime.compile, device)  # compile on a CPU without a C++ compiler: refused
-    if cfg.runtime.capture_video:
-        check_video("--capture-video")  # without moviepy: refused before the run dir is touched
-    check_tracking(cfg)  # --track without wandb: the same
+    check_extras(cfg)
     checkpoint = None
     if cfg.resume:
         check_resume(cfg)  # a flag a resume may not change: refused before the checkpoint is read

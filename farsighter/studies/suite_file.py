@@ -16,6 +16,7 @@ from typing import Any
 
 import yaml
 
+from farsighter.config.presets import PREVIOUS_GENERAL_FARSIGHTER
 from farsighter.studies.runner import Agent
 
 SUITE_FILE = Path(__file__).with_name("suite.yaml")
@@ -93,6 +94,10 @@ def _reference(task: dict[str, Any], key: str, where: str) -> Reference:
     return Reference(float(task[key]), source)
 
 
+BASES: dict[str, dict[str, Any]] = {"": {}, "session-45": PREVIOUS_GENERAL_FARSIGHTER}
+"""An agent's ``base`` in the suite file: overrides kept in the library, under its own."""
+
+
 def load_suite(path: Path = SUITE_FILE) -> Suite:
     """Read and check a suite file (ValueError, naming what is wrong, on a malformed one)."""
     data = yaml.load(Path(path).read_text(), Loader=_UniqueKeys)  # a SafeLoader
@@ -121,8 +126,11 @@ def load_suite(path: Path = SUITE_FILE) -> Suite:
                 raise ValueError(f"{where}: the budget is shorter than one episode")
             tasks.append(task)
         families[name] = SuiteFamily(name, fam["set"], str(fam["kind"]), tuple(tasks))
+    unknown = [a["base"] for a in data["agents"].values() if a.get("base", "") not in BASES]
+    if unknown:
+        raise ValueError(f"{path}: unknown agent base(s) {unknown}; accepted: {list(BASES)}")
     agents = tuple(
-        Agent(label, a["algo"], dict(a.get("overrides") or {}))
+        Agent(label, a["algo"], {**BASES[a.get("base", "")], **(a.get("overrides") or {})})
         for label, a in data["agents"].items()
     )
     default = tuple(data["default_agents"])
