@@ -23,6 +23,22 @@ from tests.conftest import tiny
 from tests.test_cli import run_cli
 from tests.test_training import metric_rows, weights
 
+
+def _default_sigint() -> None:
+    """SIGINT as an interactive shell leaves it: a process started in the background (nohup,
+    ``cmd &``) inherits it ignored, and a run keeps an ignored signal ignored."""
+    signal.signal(signal.SIGINT, signal.default_int_handler)
+
+
+@pytest.fixture(autouse=True)
+def _sigint_delivered() -> Any:
+    """These tests send SIGINT to this process or a child: deliver it whatever the test runner
+    inherited."""
+    previous = signal.getsignal(signal.SIGINT)
+    _default_sigint()
+    yield
+    signal.signal(signal.SIGINT, previous)
+
 LONG = [
     *("--algo", "ddqn", "--env", "CartPole-v1", "--preset", "control"),
     *("--total-steps", "1000000", "--learning-starts", "100", "--checkpoint-every", "1000000"),
@@ -42,6 +58,7 @@ def test_a_signal_saves_a_checkpoint_and_the_resume_continues_it(
 ) -> None:
     proc = subprocess.Popen(
         [sys.executable, "-m", "farsighter", "train", "--run-dir", "run", *LONG],
+        preexec_fn=_default_sigint,  # the child's SIGINT as a shell's
         cwd=tmp_path,
         stdout=subprocess.PIPE,
         stderr=subprocess.PIPE,
