@@ -77,7 +77,8 @@ class BLRConfig:
     the next state raises the target: optimism propagates back along the chain of bootstraps,
     as in randomised value functions (Osband et al. 2019); our extension, not the paper's. With
     gamma = 1 that optimism is not discounted along loops (on the bridge maze, with the general
-    posterior, Farsighter failed 2 of 2 seeds that the maze preset solves: docs/results/explore).
+    posterior, Farsighter failed 2 of 2 seeds that the maze preset solves: docs/results/explore
+    at commit 38d9854).
     sample-greedy: the draw added to the target Q alone, the argmax under the mean, so the
     target takes the draw of the mean's greedy action (zero-mean noise) rather than the largest
     of the actions' draws, whose positive mean a one-step bootstrap adds up over 1 / (1 - gamma)
@@ -97,9 +98,9 @@ class BLRConfig:
     """With ``optimism = until-reward`` (or ``Config.k_target = cut``): the k-step target after
     the switch. k: the plain k-step return, which follows the behaviour, so a lock whose path
     the draws leave is forgotten once its target is no longer lifted (the chain L = 30: solved
-    5/5, held 1/5, docs/results/explore/until-reward). cut: the return stopped before the first
-    exploratory action (``Config.k_target = cut``; the run records which actions were from its
-    start). Our extension."""
+    5/5, held 1/5, docs/results/explore/until-reward at commit 38d9854). cut: the return stopped
+    before the first exploratory action (``Config.k_target = cut``; the run records which
+    actions were from its start). Our extension."""
     switch_restart: Literal["none", "prior", "zero-targets", "refit", "refit-zero"] = "none"
     """With ``optimism = until-reward`` and ``mode = incremental``: what the posterior keeps of
     the optimistic targets at the switch. Its running statistics never forget, and every target

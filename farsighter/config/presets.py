@@ -61,10 +61,11 @@ _FRESH_POSTERIOR: dict[str, Any] = {
     "blr.prior_std": 1.0,
     "blr.noise_std": 1.0,
     # Uncertainty about the next state raises the target, so optimism propagates. Measured
-    # against the posterior mean (docs/results/explore/targets*): the draw wins the 30-state
-    # chain (5/5 against 0/5) and deep sea N = 14 (3/5 against 1/5); the mean wins the slippery
-    # FrozenLake (5/5 against 0/5), where the draw's optimism, the same at every state that
-    # does not end the episode, keeps the greedy policy away from the goal that ends it.
+    # against the posterior mean (docs/results/explore/targets* at commit 38d9854): the draw wins
+    # the 30-state chain (5/5 against 0/5) and deep sea N = 14 (3/5 against 1/5); the mean wins
+    # the slippery FrozenLake (5/5 against 0/5), where the draw's optimism, the same at every
+    # state that does not end the episode, keeps the greedy policy away from the goal that ends
+    # it.
     "blr.target": "sample",
 }
 # The learner of the general preset (what `auto` gives a small discrete task), for every agent

@@ -334,12 +334,12 @@ TASKS: dict[str, tuple[str, int]] = {
 _ALWAYS = {"blr.optimism": "always"}
 """Pinned by the agents that compare kinds of target for the whole run (the general preset's
 Farsighter switches to the posterior mean's cut target at its first positive reward since
-docs/results/explore/until-reward-cut; the studies in docs/results that name them were made
-before, with the targets for the whole run)."""
+docs/results/explore/until-reward-cut at commit 38d9854; the studies there that name them were
+made before, with the targets for the whole run)."""
 _KEPT = {"blr.switch_restart": "none"}
 """Pinned by the agents measured when the posterior kept its optimistic targets at the switch
 (the general preset restarts it from its prior since session 37), so that their names still
-say what their results in docs/results are."""
+say what their results in docs/results/explore (at commit 38d9854) are."""
 _S39 = {
     "blr.switch_restart": "refit",
     "blr.stay_optimism": True,
@@ -356,9 +356,10 @@ AGENTS: tuple[Agent, ...] = (
     Agent("DDQN", "ddqn"),
     Agent("k-DDQN", "kddqn"),
     Agent("BDQN", "bdqn"),
-    # the library's default: a draw held for k steps since docs/results/explore/redraw-*; a draw
-    # per step (Algorithm 2) before it, back to the DoorKey runs; per episode when
-    # docs/results/explore/report.md (the chain) was made, so there "Farsighter" is per episode
+    # the library's default: a draw held for k steps since docs/results/explore/redraw-* (at
+    # commit 38d9854, as every docs/results/explore path here); a draw per step (Algorithm 2)
+    # before it, back to the DoorKey runs; per episode when docs/results/explore/report.md (the
+    # chain) was made, so there "Farsighter" is per episode
     Agent("Farsighter", "farsighter"),
     Agent("Farsighter (redraw step)", "farsighter", {"blr.redraw": "step"}),
     Agent("Farsighter (redraw k)", "farsighter", {"blr.redraw": "k"}),
@@ -378,8 +379,8 @@ AGENTS: tuple[Agent, ...] = (
     ),
     # the posterior over the learned features and 512 fixed random features of the observation,
     # so that its uncertainty is about states (farsighter.networks.RandomFeatureTorso): the
-    # default since docs/results/explore/random-features*; over the learned features alone
-    # before it (every study in docs/results made before those)
+    # default since docs/results/explore/random-features* at commit 38d9854; over the learned
+    # features alone before it (every study there made before those)
     Agent("Farsighter (random features)", "farsighter", {"blr.random_features": 512}),
     Agent("Farsighter (learned features)", "farsighter", {"blr.random_features": 0}),
     # the sampled target's optimism centred in each minibatch (blr.center_sample), against the
@@ -399,7 +400,8 @@ AGENTS: tuple[Agent, ...] = (
     # its mean follows a rarely seen reward from a few samples where the default's needs the
     # row's whole time in the replay, while its width where the run has not been stays the
     # prior's (benchmarks/deepsea_frontier.py --set blr.data_weight=100): the default since
-    # docs/results/explore/dataweight-*; 1 before it (every study in docs/results made before)
+    # docs/results/explore/dataweight-* at commit 38d9854; 1 before it (every study there made
+    # before)
     Agent("Farsighter (data weight 100)", "farsighter", {"blr.data_weight": 100.0}),
     Agent("Farsighter (data weight 1)", "farsighter", {"blr.data_weight": 1.0}),
     # the random layer 512 wide whatever the observation, against the default's, widened to the
@@ -451,7 +453,8 @@ AGENTS: tuple[Agent, ...] = (
     ),
     # the default's targets until the first positive reward, then the mean's target cut there,
     # the posterior keeping what it had summed: the defaults from
-    # docs/results/explore/until-reward-cut to session 36 (the targets kept at the switch)
+    # docs/results/explore/until-reward-cut (at commit 38d9854) to session 36 (the targets
+    # kept at the switch)
     Agent(
         "Farsighter (optimism until reward, then cut)",
         "farsighter",
@@ -566,8 +569,9 @@ AGENTS: tuple[Agent, ...] = (
     ),
 )
 # Every named Farsighter variant was measured as a change of the general preset's Farsighter of
-# session 45 (docs/results/explore), and is kept as that change: its base is that default
-# (PREVIOUS_GENERAL_FARSIGHTER), so a label still names the config its results were made with.
+# session 45 (docs/results/explore at commit 38d9854), and is kept as that change: its base is
+# that default (PREVIOUS_GENERAL_FARSIGHTER), so a label still names the config its results were
+# made with.
 # "Farsighter" alone is the library's default.
 AGENTS = tuple(
     Agent(a.label, a.algo, {**PREVIOUS_GENERAL_FARSIGHTER, **a.overrides})
@@ -624,9 +628,9 @@ DEFAULT_AGENTS = tuple(a.label for a in AGENTS if a.label not in _NAMED_ONLY)
 "Farsighter (random features)", "Farsighter (data weight 100)" and "Farsighter (optimism until
 reward, then cut)" build the same config as "Farsighter" now that a draw held for k steps, the
 random features, the data weight 100 and the switch at the first reward are the defaults (the
-saved studies in docs/results name them);
-the two mean-target variants belong to the comparison of the targets
-(docs/results/explore/targets), and "Farsighter (learned features)" to that of the features."""
+saved studies under docs/results/explore at commit 38d9854 name them); the two mean-target
+variants belong to the comparison of the targets (docs/results/explore/targets at 38d9854), and
+"Farsighter (learned features)" to that of the features."""
 
 
 @dataclass(frozen=True)
