@@ -24,7 +24,7 @@ import numpy as np
 from farsighter.config import make_config
 from farsighter.envs import make_env
 from farsighter.envs.tabular import TABULAR_TASKS, reference_returns
-from farsighter.studies.explore import deep_sea_optimal_return
+from farsighter.studies.explore.families import deep_sea_optimal_return
 from farsighter.studies.suite_file import SUITE_FILE, load_suite
 
 EPISODES = 1_000

@@ -19,7 +19,6 @@ import pytest
 
 from farsighter.cli import main
 from farsighter.config import make_config
-from farsighter.config.presets import PREVIOUS_GENERAL_FARSIGHTER
 from farsighter.envs import make_env, make_vector_env
 from farsighter.envs.chain import chain_id, drift_chain_id
 from farsighter.envs.deep_sea import deep_sea_id
@@ -41,6 +40,7 @@ from farsighter.studies.explore import (
     deep_sea_success_probability,
     ended_bad_flags,
     episodes_budget,
+    families,
     fit_growth,
     growth,
     measure,
@@ -140,11 +140,11 @@ def test_deep_sea_families_budgets_and_thresholds(monkeypatch: pytest.MonkeyPatc
     assert budget_steps(12) == 36_000
     assert sto.budgets == tuple(budget_steps(n) for n in sto.sizes)
     assert sto.budgets == (6_000, 11_240, 42_000, 60_000)
-    monkeypatch.setattr(explore, "DEEP_SEA_MAX_EPISODES", 10_000)  # the one place to change it
+    monkeypatch.setattr(families, "DEEP_SEA_MAX_EPISODES", 10_000)  # the one place to change it
     assert (episodes_budget(12), budget_steps(12), episodes_budget(14)) == (4196, 50_352, 10_000)
-    monkeypatch.setattr(explore, "DEEP_SEA_MAX_EPISODES", 500)  # the cap wins over the floor
+    monkeypatch.setattr(families, "DEEP_SEA_MAX_EPISODES", 500)  # the cap wins over the floor
     assert episodes_budget(6) == 500
-    monkeypatch.setattr(explore, "DEEP_SEA_MIN_EPISODES", 100)
+    monkeypatch.setattr(families, "DEEP_SEA_MIN_EPISODES", 100)
     assert episodes_budget(6) == 164
     monkeypatch.undo()
     # greedy criteria: deterministic, one episode every max(100, 5 N) steps at 0.5
@@ -186,230 +186,28 @@ def test_deep_sea_families_budgets_and_thresholds(monkeypatch: pytest.MonkeyPatc
 
 
 def test_agents_are_one_config_each_on_the_auto_preset(tmp_path: Path) -> None:
-    assert [a.label for a in AGENTS] == [
-        "DDQN",
-        "k-DDQN",
-        "BDQN",
-        "Farsighter",
-        "Farsighter (redraw step)",
-        "Farsighter (redraw k)",
-        "Farsighter (redraw episode)",
-        "Farsighter (redraw revisit)",
-        "Farsighter (k-step target)",
-        "Farsighter (mean target)",
-        "Farsighter (mean, k-step target)",
-        "Farsighter (random features)",
-        "Farsighter (learned features)",
-        "Farsighter (centred draw)",
-        "Farsighter (prior 3)",
-        "Farsighter (prior 10)",
-        "OB2I",
-        "RND",
-        "Farsighter (Fourier features)",
-        "Farsighter (data weight 100)",
-        "Farsighter (data weight 1)",
-        "Farsighter (fixed width)",
-        "Farsighter (max by mean)",
-        "Farsighter (greedy-action draw)",
-        "Farsighter (greedy-action draw, k-step target)",
-        "Farsighter (greedy-action draw, max by mean)",
-        "Farsighter (optimism until reward)",
-        "Farsighter (cut)",
-        "Farsighter (mean, cut)",
-        "Farsighter (cut, optimism until reward)",
-        "Farsighter (optimism until reward, then cut)",
-        "Farsighter (cut margin 1)",
-        "Farsighter (switch restart)",
-        "Farsighter (switch restart, k-step)",
-        "Farsighter (switch restart, cut margin 1)",
-        "Farsighter (zero targets)",
-        "Farsighter (refit at switch)",
-        "Farsighter (zero targets, cut margin 1)",
-        "Farsighter (zero targets, cut delay 3)",
-        "Farsighter (cut delay 3)",
-        "Farsighter (rearm 10)",
-        "Farsighter (rearm 10, cut delay 3)",
-        "Farsighter (no optimism in place)",
-        "Farsighter (no optimism in place, redraw revisit)",
-        "Farsighter (no optimism in place, zero targets, cut delay 3)",
-        "Farsighter (no optimism in place, refit or zero targets, cut delay 3)",
-        "Farsighter (posterior width)",
-        "Farsighter (advantage learning 0.9)",
-        "Farsighter (uniform at revisits)",
-        "Farsighter (uniform at revisits after unpaid episodes)",
-        "Farsighter (uniform at revisits after time limits)",
-    ]
+    assert [a.label for a in AGENTS] == ["DDQN", "k-DDQN", "BDQN", "Farsighter", "OB2I", "RND"]
+    assert StudyConfig().agents == tuple(a.label for a in AGENTS)
     by = {a.label: a for a in AGENTS}
-    # the default list trains no config twice, and leaves out the variants run only when named
-    named_only = {
-        "Farsighter (redraw k)",
-        "Farsighter (mean target)",
-        "Farsighter (mean, k-step target)",
-        "Farsighter (random features)",
-        "Farsighter (learned features)",
-        "Farsighter (centred draw)",
-        "Farsighter (prior 3)",
-        "Farsighter (prior 10)",
-        "Farsighter (Fourier features)",
-        "Farsighter (data weight 100)",
-        "Farsighter (data weight 1)",
-        "Farsighter (fixed width)",
-        "Farsighter (max by mean)",
-        "Farsighter (greedy-action draw)",
-        "Farsighter (greedy-action draw, k-step target)",
-        "Farsighter (greedy-action draw, max by mean)",
-        "Farsighter (optimism until reward)",
-        "Farsighter (cut)",
-        "Farsighter (mean, cut)",
-        "Farsighter (cut, optimism until reward)",
-        "Farsighter (optimism until reward, then cut)",
-        "Farsighter (cut margin 1)",
-        "Farsighter (switch restart)",
-        "Farsighter (switch restart, k-step)",
-        "Farsighter (switch restart, cut margin 1)",
-        "Farsighter (zero targets)",
-        "Farsighter (refit at switch)",
-        "Farsighter (zero targets, cut margin 1)",
-        "Farsighter (zero targets, cut delay 3)",
-        "Farsighter (cut delay 3)",
-        "Farsighter (rearm 10)",
-        "Farsighter (rearm 10, cut delay 3)",
-        "Farsighter (no optimism in place)",
-        "Farsighter (no optimism in place, redraw revisit)",
-        "Farsighter (no optimism in place, zero targets, cut delay 3)",
-        "Farsighter (no optimism in place, refit or zero targets, cut delay 3)",
-        "Farsighter (posterior width)",
-        "Farsighter (advantage learning 0.9)",
-        "Farsighter (uniform at revisits)",
-        "Farsighter (uniform at revisits after unpaid episodes)",
-        "Farsighter (uniform at revisits after time limits)",
-    }
-    assert not named_only & set(StudyConfig().agents)
-    assert "Farsighter (redraw step)" in StudyConfig().agents
-    assert len(StudyConfig().agents) == len(AGENTS) - 41
-    every = [
-        run_config(a, QUICK, 3, tmp_path, (chain_id(10), 10_000))
-        for a in AGENTS
-        if a.label
-        not in (
-            "Farsighter (redraw k)",
-            "Farsighter (random features)",
-            "Farsighter (data weight 100)",
-            "Farsighter (uniform at revisits after time limits)",
-        )
-    ]
-    assert len({repr(dataclasses.replace(c, run_dir="")) for c in every}) == len(every)
-    mean_k = run_config(
-        by["Farsighter (mean, k-step target)"], QUICK, 3, tmp_path, (chain_id(10), 1)
-    )
-    assert (mean_k.blr.target, mean_k.k_target) == ("mean", "k")
-    assert (every[3].blr.target, every[3].k_target) == ("sample", "k")  # the default's
-    assert (
-        every[3].blr.random_features == 512
-    )  # the default's: the posterior over random features too
-    assert every[3].blr.data_weight == 100.0  # the default's
-    weight_100 = run_config(
-        by["Farsighter (data weight 100)"], QUICK, 3, tmp_path, (chain_id(10), 10_000)
-    )
-    # the named variants change session 45's default (their base), not today's
-    session45 = Agent("Farsighter (session 45)", "farsighter", dict(PREVIOUS_GENERAL_FARSIGHTER))
-    previous = run_config(session45, QUICK, 3, tmp_path, (chain_id(10), 10_000))
-    assert dataclasses.replace(weight_100, run_dir="") == dataclasses.replace(previous, run_dir="")
-    switch = run_config(
-        by["Farsighter (optimism until reward, then cut)"], QUICK, 3, tmp_path, (chain_id(10), 1)
-    )
-    assert (switch.blr.optimism, switch.blr.calibrated_k_target) == ("until-reward", "cut")
-    default = run_config(session45, QUICK, 3, tmp_path, (chain_id(10), 1))
-    # session 39's defaults: the default but for the prior where the refit is rejected, the
-    # draw for staying put, the cut at every exploratory action, no advantage learning and the
-    # draw's action at every revisit
-    s39 = dataclasses.replace(
-        default.blr,
-        stay_optimism=True,
-        cut_delay=0.0,
-        advantage_learning=0.0,
-        revisit_action="draw",
-    )
-    assert (default.blr.stay_optimism, default.blr.cut_delay) == (False, 3.0)
-    # the defaults up to session 36: session 39's but for the targets kept at the switch
-    kept = dataclasses.replace(s39, switch_restart="none")
-    assert dataclasses.replace(switch, run_dir="") == dataclasses.replace(
-        default, run_dir="", blr=kept
-    )
-    # the defaults of sessions 37 and 38: the posterior restarted from the prior alone; since
-    # session 39 refitted
-    restart = run_config(by["Farsighter (switch restart)"], QUICK, 3, tmp_path, (chain_id(10), 1))
-    prior = dataclasses.replace(s39, switch_restart="prior")
-    assert dataclasses.replace(restart, run_dir="") == dataclasses.replace(
-        default, run_dir="", blr=prior
-    )
-    refitted = run_config(by["Farsighter (refit at switch)"], QUICK, 3, tmp_path, (chain_id(10), 1))
-    refit = dataclasses.replace(s39, switch_restart="refit")
-    assert dataclasses.replace(refitted, run_dir="") == dataclasses.replace(
-        default, run_dir="", blr=refit
-    )
-    # session 40's default: the refit, zeroed targets where it is rejected, no advantage learning
-    s40 = run_config(
-        by["Farsighter (no optimism in place, refit or zero targets, cut delay 3)"],
-        QUICK,
-        3,
-        tmp_path,
-        (chain_id(10), 1),
-    )
-    no_al = dataclasses.replace(default.blr, advantage_learning=0.0, revisit_action="draw")
-    assert dataclasses.replace(s40, run_dir="") == dataclasses.replace(
-        default, run_dir="", blr=no_al
-    )
-    # session 41's default: advantage learning after the switch, the draw's action at revisits
-    s41 = run_config(
-        by["Farsighter (advantage learning 0.9)"], QUICK, 3, tmp_path, (chain_id(10), 1)
-    )
-    drawn = dataclasses.replace(default.blr, revisit_action="draw")
-    assert dataclasses.replace(s41, run_dir="") == dataclasses.replace(
-        default, run_dir="", blr=drawn
-    )
-    assert default.blr.advantage_learning == 0.9
-    # since session 42 the default: a uniform action at a revisit after a time limit
-    same = run_config(
-        by["Farsighter (uniform at revisits after time limits)"],
-        QUICK,
-        3,
-        tmp_path,
-        (chain_id(10), 1),
-    )
-    assert dataclasses.replace(same, run_dir="") == dataclasses.replace(default, run_dir="")
-    assert default.blr.revisit_action == "uniform-timeout"
-    # the variants of the targets keep them for the whole run, as when their studies were made
-    for label in ("Farsighter (mean, k-step target)", "Farsighter (cut)"):
-        assert run_config(by[label], QUICK, 3, tmp_path, (chain_id(10), 1)).blr.optimism == "always"
-    until_k = run_config(
-        by["Farsighter (optimism until reward)"], QUICK, 3, tmp_path, (chain_id(10), 1)
-    )
-    assert until_k.blr.calibrated_k_target == "k"
+    assert all(a.overrides == {} for a in AGENTS)  # the library's defaults, nothing else
+    # the default list trains no config twice
     configs = [
         run_config(by[label], QUICK, 3, tmp_path, (chain_id(10), 10_000))
         for label in StudyConfig().agents
     ]
     assert len({repr(dataclasses.replace(c, run_dir="")) for c in configs}) == len(configs)
-    assert by["Farsighter"].overrides == {} and by["DDQN"].overrides == {}
-    base = PREVIOUS_GENERAL_FARSIGHTER
-    assert by["Farsighter (redraw k)"].overrides == {**base, "blr.redraw": "k"}
-    assert by["Farsighter (centred draw)"].overrides == {
-        **base,
-        "blr.center_sample": True,
-        "blr.optimism": "always",
-    }
-    fourier = run_config(by["Farsighter (Fourier features)"], QUICK, 3, tmp_path, (chain_id(10), 1))
-    assert (fourier.blr.random_features_kind, fourier.blr.random_features) == ("fourier", 512)
-    fixed = run_config(by["Farsighter (fixed width)"], QUICK, 3, tmp_path, (chain_id(10), 1))
-    assert (fixed.blr.random_features, fixed.blr.random_features_max) == (512, 0)
-    assert previous.blr.random_features_max == 1024  # session 45's default's
-    cfg = run_config(by["Farsighter (redraw step)"], QUICK, 3, tmp_path, (chain_id(10), 10_000))
+    farsighter = configs[StudyConfig().agents.index("Farsighter")]
+    assert (farsighter.blr.target, farsighter.k_target) == ("sample", "k")  # the default's
+    assert farsighter.blr.random_features == 512  # the posterior over random features too
+    assert farsighter.blr.data_weight == 100.0
+    # a variant is the auto preset with its overrides, and the family's evaluation settings
+    variant = Agent("Farsighter (redraw step)", "farsighter", {"blr.redraw": "step"})
+    cfg = run_config(variant, QUICK, 3, tmp_path, (chain_id(10), 10_000))
     assert cfg == make_config(
         "farsighter",
         chain_id(10),
         preset="auto",
-        **{**base, "blr.redraw": "step"},
+        **{"blr.redraw": "step"},
         seed=3,
         total_steps=10_000,
         eval_every=100,
@@ -425,6 +223,27 @@ def test_agents_are_one_config_each_on_the_auto_preset(tmp_path: Path) -> None:
     )
     door = run_config(by["DDQN"], QUICK, 1, tmp_path, ("MiniGrid-DoorKey-8x8-v0", 1_000_000))
     assert (door.eval_every, door.eval_episodes, door.total_steps) == (10_000, 10, 1_000_000)
+
+
+def test_the_agents_file_is_checked(tmp_path: Path) -> None:
+    from farsighter.studies.explore import agents
+
+    text = agents.AGENTS_FILE.read_text()
+    assert agents.load() == (AGENTS, explore.DEFAULT_AGENTS)
+    for edit, message in (
+        (("  RND: {algo: rnd}\n", "  RND: {algo: rnd}\n  RND: {algo: ddqn}\n"), "RND given twice"),
+        (("{algo: kddqn}", "{algo: kdqn}"), "unknown algorithm 'kdqn'"),
+        (("{algo: bdqn}", "{algo: bdqn, override: {k: 3}}"), "agent 'BDQN' takes 'algo'"),
+        (("OB2I, RND]", "OB2I, RND, PPO]"), r"default_agents \['PPO'\] are not in agents"),
+    ):
+        assert edit[0] in text
+        bad = tmp_path / "agents.yaml"
+        bad.write_text(text.replace(edit[0], edit[1], 1))
+        with pytest.raises(ValueError, match=message):
+            agents.load(bad)
+    good = tmp_path / "good.yaml"
+    good.write_text(text.replace("{algo: bdqn}", "{algo: bdqn, overrides: {k: 3}}"))
+    assert {a.label: a.overrides for a in agents.load(good)[0]}["BDQN"] == {"k": 3}
 
 
 def test_frozen_lake_family_asks_for_half_of_the_best_success_rate() -> None:
@@ -484,9 +303,7 @@ def test_settings_round_trip_and_the_command_line(tmp_path: Path) -> None:
     saved = json.loads(json.dumps(dataclasses.asdict(QUICK)))
     assert settings_of(STUDY, saved) == QUICK
     assert explore.command(saved, tmp_path) == f"farsighter explore --quick --out {tmp_path}"
-    args = parse(
-        STUDY, ["--families", "chain", "--sizes", "5", "--agents", "Farsighter (redraw k)"]
-    )
+    args = parse(STUDY, ["--families", "chain", "--sizes", "5", "--agents", "k-DDQN"])
     settings = settings_from(STUDY, args)
     line = explore.command(json.loads(json.dumps(dataclasses.asdict(settings))), tmp_path)
     assert shlex.split(line)[2:] == [
@@ -495,7 +312,7 @@ def test_settings_round_trip_and_the_command_line(tmp_path: Path) -> None:
         "--sizes",
         "5",
         "--agents",
-        "Farsighter (redraw k)",
+        "k-DDQN",
         "--out",
         str(tmp_path),
     ]

@@ -23,7 +23,7 @@ from farsighter.cli import main
 from farsighter.envs.tabular import TABULAR_TASKS, TabularMDP, reference_returns
 from farsighter.plots import read_csv
 from farsighter.studies import suite
-from farsighter.studies.explore import deep_sea_optimal_return
+from farsighter.studies.explore.families import deep_sea_optimal_return
 from farsighter.studies.suite import (
     FULL,
     QUICK,

@@ -29,7 +29,7 @@ from farsighter.envs.maze import DEFAULT_MAX_EPISODE_STEPS, ENV_ID, SMALL_ENV_ID
 from farsighter.errors import FarsighterError
 from farsighter.plots import band, figure, finish_axes, markdown_table
 from farsighter.rundir import EVAL_SUCCESS_FILE
-from farsighter.studies import explore, maze, runner
+from farsighter.studies import maze, runner
 from farsighter.studies.claims import (
     CONFIDENCE,
     N_BOOT,
@@ -40,6 +40,7 @@ from farsighter.studies.claims import (
     compare,
     fmt,
 )
+from farsighter.studies.explore.families import FAMILIES, TASKS
 from farsighter.studies.runner import Agent, Runs, StudyArgs, Task
 
 KS: tuple[int, ...] = (1, 10, 50, 150, 500)
@@ -201,9 +202,9 @@ def solved_rule(env: str) -> Solved | None:
     threshold), or the environment's registered ``reward_threshold``; None where none is known."""
     if env in (ENV_ID, SMALL_ENV_ID):
         return MAZE_SOLVED
-    if env in explore.TASKS:
-        name, size = explore.TASKS[env]
-        family = explore.FAMILIES[name]
+    if env in TASKS:
+        name, size = TASKS[env]
+        family = FAMILIES[name]
         return Solved(
             family.threshold_at(size),
             strict=False,

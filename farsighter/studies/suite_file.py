@@ -95,12 +95,51 @@ def _reference(task: dict[str, Any], key: str, where: str) -> Reference:
 
 
 BASES: dict[str, dict[str, Any]] = {"": {}, "session-45": PREVIOUS_GENERAL_FARSIGHTER}
-"""An agent's ``base`` in the suite file: overrides kept in the library, under its own."""
+"""An agent's ``base`` in a study's file: overrides kept in the library, under its own."""
+AGENT_KEYS = ("algo", "base", "overrides")
+"""What an agent of a study's file may give: its algorithm (required), a :data:`BASES` name and
+its overrides of the library's defaults (dotted config keys)."""
+
+
+def read_yaml(path: Path) -> Any:
+    """A study's YAML file, read with the safe loader and refused where one mapping gives a key
+    twice (ValueError)."""
+    return yaml.load(Path(path).read_text(), Loader=_UniqueKeys)  # a SafeLoader
+
+
+def load_agents(data: dict[str, Any], path: Path) -> tuple[tuple[Agent, ...], tuple[str, ...]]:
+    """The agents of a study's file (``agents``: label -> {algo, base, overrides}) and its
+    ``default_agents``, checked (ValueError, naming what is wrong): the suite's and the
+    exploration study's (``farsighter/studies/explore/agents.yaml``)."""
+    from farsighter.algorithms import ALGORITHMS
+
+    entries = data.get("agents")
+    if not isinstance(entries, dict) or not entries:
+        raise ValueError(f"{path}: 'agents' must map each label to its algorithm and overrides")
+    for label, a in entries.items():
+        if not isinstance(a, dict) or "algo" not in a or set(a) - set(AGENT_KEYS):
+            raise ValueError(
+                f"{path}: agent {label!r} takes 'algo' (required), 'base', 'overrides'"
+            )
+        if a["algo"] not in ALGORITHMS:
+            raise ValueError(f"{path}: agent {label!r}: unknown algorithm {a['algo']!r}")
+    unknown = [a["base"] for a in entries.values() if a.get("base", "") not in BASES]
+    if unknown:
+        raise ValueError(f"{path}: unknown agent base(s) {unknown}; accepted: {list(BASES)}")
+    agents = tuple(
+        Agent(str(label), a["algo"], {**BASES[a.get("base", "")], **(a.get("overrides") or {})})
+        for label, a in entries.items()
+    )
+    default = tuple(data["default_agents"])
+    stray = [a for a in default if a not in entries]
+    if stray:
+        raise ValueError(f"{path}: default_agents {stray} are not in agents")
+    return agents, default
 
 
 def load_suite(path: Path = SUITE_FILE) -> Suite:
     """Read and check a suite file (ValueError, naming what is wrong, on a malformed one)."""
-    data = yaml.load(Path(path).read_text(), Loader=_UniqueKeys)  # a SafeLoader
+    data = read_yaml(path)
     families: dict[str, SuiteFamily] = {}
     seen: set[str] = set()
     for name, fam in data["families"].items():
@@ -126,17 +165,7 @@ def load_suite(path: Path = SUITE_FILE) -> Suite:
                 raise ValueError(f"{where}: the budget is shorter than one episode")
             tasks.append(task)
         families[name] = SuiteFamily(name, fam["set"], str(fam["kind"]), tuple(tasks))
-    unknown = [a["base"] for a in data["agents"].values() if a.get("base", "") not in BASES]
-    if unknown:
-        raise ValueError(f"{path}: unknown agent base(s) {unknown}; accepted: {list(BASES)}")
-    agents = tuple(
-        Agent(label, a["algo"], {**BASES[a.get("base", "")], **(a.get("overrides") or {})})
-        for label, a in data["agents"].items()
-    )
-    default = tuple(data["default_agents"])
-    stray = [a for a in default if a not in data["agents"]]
-    if stray:
-        raise ValueError(f"{path}: default_agents {stray} are not in agents")
+    agents, default = load_agents(data, path)
     quick = data["quick"]
     return Suite(
         families,
