@@ -43,6 +43,8 @@ commands:
   eval      evaluate a run:   farsighter eval RUN_DIR [--episodes 10] [--seed S]
             watch or record:  farsighter eval RUN_DIR --render human | --video DIR
   plot      draw a run's learning curve:  farsighter plot RUN_DIR
+  inspect   probe trained runs' values (action gaps, Q against Q* or the returns that followed):
+            farsighter inspect <probe> RUN_DIR [RUN_DIR ...]  (farsighter inspect --help)
   presets   list the named presets and their sources
 """
 
@@ -299,6 +301,12 @@ def cmd_presets(argv: Sequence[str]) -> int:
     return 0
 
 
+def cmd_inspect(argv: Sequence[str]) -> int:
+    from farsighter.probes import main as inspect_main
+
+    return inspect_main(argv)
+
+
 def cmd_maze(argv: Sequence[str]) -> int:
     from farsighter.studies.maze import main as maze_main
 
@@ -352,6 +360,7 @@ COMMANDS: dict[str, Callable[[Sequence[str]], int]] = {
     "train": cmd_train,
     "eval": cmd_eval,
     "plot": cmd_plot,
+    "inspect": cmd_inspect,
     "presets": cmd_presets,
 }
 

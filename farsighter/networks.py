@@ -144,8 +144,9 @@ class RandomFeatureTorso(Torso):
     uncertainty about states, as the random prior functions of Osband et al. (2018) give an
     ensemble. How much of a new state's psi is its own differs by kind: on deep sea's one-hot
     cells the ReLU features share a large common part (the bias and the ReLU's mean), the
-    Fourier features almost none (``benchmarks/feature_novelty.py``; docs/design.md, "Why a
-    fixed random layer runs out at depth")."""
+    Fourier features almost none (``benchmarks/results/feature_novelty_fourier_s26.json``, made
+    by benchmarks/feature_novelty.py, deleted after commit c5d8fda; docs/design.md, "Why a fixed
+    random layer runs out at depth")."""
 
     rf_weight: torch.Tensor
     rf_bias: torch.Tensor

@@ -38,12 +38,12 @@ def common() -> ModuleType:
         # absolute paths inside the repository become relative, also after --flag=; others stay
         (
             [
-                "/abs/repo/benchmarks/maze_collapse.py",
+                "/abs/repo/benchmarks/pool_rounds.py",
                 "/abs/repo/docs/results/maze",
                 "--out=/abs/repo/o",
             ],
             True,
-            "python -m benchmarks.maze_collapse docs/results/maze --out=o",
+            "python -m benchmarks.pool_rounds docs/results/maze --out=o",
         ),
         (
             ["/abs/repo/benchmarks/x.py", "/tmp/elsewhere", "/abs/repo"],

@@ -74,7 +74,7 @@ _FRESH_POSTERIOR: dict[str, Any] = {
 # target copy per 1,000 steps, the minibatch from the latest N transitions) was set for robotic
 # tasks of 100M steps; on small tasks it learned too slowly to use what the posterior found
 # (bsuite deep sea N = 10 and 14: 0 of 4 seeds; this learner 4 of 4; benchmarks/
-# small_task_learner.py, docs/design.md "The learner of small tasks").
+# small_task_learner.py, deleted after c5d8fda; docs/design.md "The learner of small tasks").
 _SMALL_TASK_LEARNER: dict[str, Any] = {
     "optimizer": "adam",
     "lr": 0.001,
@@ -170,7 +170,7 @@ PRESETS: dict[str, Preset] = {
             "the paper with --preset control or atari.",
             "Farsighter paper Table 1 (control column) for gamma and the BLR values; the "
             "learner and the posterior settings are ours, chosen on the exploration suite "
-            "(benchmarks/small_task_learner.py, farsighter suite; docs/results/suite)",
+            "(benchmarks/small_task_learner.py, deleted after c5d8fda; farsighter suite; docs/results/suite)",
             {
                 **_CONTROL,
                 **_SMALL_TASK_LEARNER,
@@ -356,7 +356,7 @@ PRESETS: dict[str, Preset] = {
             "Farsighter paper Table 1 (gamma, buffer, N = 1k, posterior minibatch 1k, "
             "sigma_eps, prior sigma); Adam at 1e-3 as DDPG's critic (Lillicrap et al. 2016); "
             "batch 128, one update per step, no gradient clipping, ELBO cadence: our tuning on "
-            "Pendulum-v1 (benchmarks/learning_pendulum.py)",
+            "Pendulum-v1 (benchmarks/learning.py)",
             {
                 "optimizer": "adam",
                 "lr": 0.001,
