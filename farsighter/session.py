@@ -1,6 +1,9 @@
 """A run in progress, beside its directory (:mod:`farsighter.rundir`): the loop's counters, the
 checkpoint schema (save and restore), what is logged per episode and per interval, evaluation,
 and the summary. :func:`farsighter.train.train` composes these into the loop.
+
+Evaluation (:mod:`farsighter.evaluation`) and what a vector step's results say
+(:mod:`farsighter.step_info`) live beside this module and are re-exported from it.
 """
 
 from __future__ import annotations
@@ -25,9 +28,20 @@ from farsighter import jsonio
 from farsighter.agents import Agent
 from farsighter.config import Config
 from farsighter.envs.video import VIDEO_DIR, EvalVideo, eval_video
-from farsighter.errors import Diverged, EnvError, RunDirError
+from farsighter.errors import Diverged, RunDirError
+from farsighter.evaluation import (  # noqa: F401  (re-exported)
+    EVAL_MAX_ENVS,
+    EvalResult,
+    eval_step_cap,
+    evaluate_episodes,
+)
 from farsighter.policy_file import policy_state
 from farsighter.rundir import SUMMARY_FILE, RunLogger, load_checkpoint, save_checkpoint
+from farsighter.step_info import (  # noqa: F401  (re-exported)
+    check_transition,
+    final_observations,
+    finished_episodes,
+)
 from farsighter.tracking import VIDEO_TAG, run_trackers
 
 POLICY_FILE = "policy.pt"  # what acting needs of the trained agent (farsighter.policy_file)
@@ -165,177 +179,8 @@ def _pickle_envs(envs: gym.vector.VectorEnv) -> bytes | None:
 
 
 # --------------------------------------------------------------------------------------------
-# Evaluation.
-# --------------------------------------------------------------------------------------------
-
-
-@dataclass
-class EvalResult:
-    """Returns of the evaluation episodes, and ``info["is_success"]`` at each episode's end
-    (goal-conditioned tasks; empty when the environment does not report it)."""
-
-    returns: list[float]
-    successes: list[float]
-
-
-EVAL_MAX_ENVS = 32
-"""Most environments an evaluation steps at once; more episodes run in turn through them (the
-returns do not depend on how many run at once)."""
-
-
-@dataclass
-class _Running:
-    """An evaluation episode in progress in one environment of the batch."""
-
-    episode: int
-    obs: Any
-    rng: np.random.Generator
-    total: float = 0.0
-    steps: int = 0
-
-
-def eval_step_cap(cfg: Config) -> int:
-    """Most steps of one evaluation episode: ``eval_max_steps`` (27,000 under the Atari protocol)
-    for a run at least that long. A shorter run is no protocol run, and its evaluations play at
-    most as many steps as it trains: each episode is capped at total_steps // eval_episodes
-    (a barely trained Atari policy that never presses FIRE would otherwise play every episode
-    to the protocol's cap, minutes for a run of seconds)."""
-    if cfg.total_steps >= cfg.eval_max_steps:
-        return cfg.eval_max_steps
-    return max(1, cfg.total_steps // cfg.eval_episodes)
-
-
-def evaluate_episodes(
-    agent: Agent,
-    cfg: Config,
-    envs: Sequence[gym.Env],
-    episodes: int,
-    seed: int,
-    global_step: int,
-    progress: bool = False,
-) -> EvalResult:
-    """``episodes`` greedy episodes (eval_epsilon-greedy for discrete actions; the posterior mean
-    / noiseless mu for continuous ones) on evaluation environments (unclipped rewards, no
-    life-loss terminals: :func:`farsighter.envs.make_eval_envs`), run as a batch: up to
-    ``len(envs)`` at once with one forward pass over the running ones per step, each environment
-    taking the next episode when its own ends (terminated, truncated, or after
-    :func:`eval_step_cap` steps).
-
-    Episode ``i`` starts from ``reset(seed=seed + i)`` and draws its eval_epsilon coins (one per
-    step, and the random action when it comes up) from its own ``default_rng(seed + i)``; so
-    episode 0 is the one the earlier, sequential evaluation ran first, and no episode depends
-    on the batch's width or on the other episodes: for a deterministic greedy policy each returns
-    what it returns stepped alone. (The sequential evaluation let episodes 1, 2, ... continue its
-    one environment's generators; environments side by side cannot share them, and seeding them
-    alike would give every episode of a stochastic task the same noise.) The agent's generators
-    are not touched (``act(explore=False)`` draws nothing). Returns (and ``info["is_success"]``
-    at each end, where reported) are listed in episode order. ``progress``: a bar of the
-    finished episodes, with the steps of the longest running one."""
-    if not envs:
-        raise ValueError("evaluate_episodes needs at least one environment")
-    cap = eval_step_cap(cfg)
-    space = envs[0].action_space
-    n_actions = int(space.n) if isinstance(space, gym.spaces.Discrete) else 0
-    returns = [0.0] * episodes
-    success_of: list[float | None] = [None] * episodes
-    running: dict[int, _Running] = {}  # environment index -> its episode
-    queued = iter(range(episodes))
-
-    def start(slot: int) -> None:
-        i = next(queued, None)
-        if i is not None:
-            obs, _ = envs[slot].reset(seed=seed + i)
-            running[slot] = _Running(i, obs, np.random.default_rng(seed + i))
-
-    for slot in range(min(len(envs), episodes)):
-        start(slot)
-    bar = tqdm(
-        total=episodes,
-        unit="episode",
-        desc=f"eval at step {global_step}",
-        disable=not progress,
-        leave=False,
-        dynamic_ncols=True,
-    )
-    shown = time.perf_counter()
-    try:
-        while running:
-            slots = sorted(running)
-            obs_E = np.stack([np.asarray(running[slot].obs) for slot in slots])
-            actions_E = agent.act(obs_E, global_step, explore=False)
-            for slot, action in zip(slots, actions_E, strict=True):
-                run = running[slot]
-                if n_actions and run.rng.random() < cfg.eval_epsilon:
-                    action = int(run.rng.integers(n_actions))
-                run.obs, reward, terminated, truncated, info = envs[slot].step(action)
-                run.total += float(reward)
-                run.steps += 1
-                if terminated or truncated or run.steps >= cap:
-                    returns[run.episode] = run.total
-                    if "is_success" in info:
-                        success_of[run.episode] = float(info["is_success"])
-                    del running[slot]
-                    bar.update(1)
-                    start(slot)
-            if progress and running and time.perf_counter() - shown >= 1.0:
-                longest = max(run.steps for run in running.values())
-                bar.set_postfix_str(f"step {longest:,} of at most {cap:,}")
-                shown = time.perf_counter()
-    finally:
-        bar.close()
-    return EvalResult(returns, [s for s in success_of if s is not None])
-
-
-# --------------------------------------------------------------------------------------------
 # What a run writes as it goes.
 # --------------------------------------------------------------------------------------------
-
-
-def final_observations(info: dict[str, Any], num_envs: int) -> list[Any] | None:
-    """The last observation of each environment whose episode ended at this step (else None)."""
-    if "final_obs" not in info:
-        return None
-    mask = info["_final_obs"]
-    return [info["final_obs"][i] if mask[i] else None for i in range(num_envs)]
-
-
-def check_transition(
-    env_id: str, step: int, rewards: np.ndarray, obs: Any, final_obs: list[Any] | None
-) -> None:
-    """Refuse, with one line naming the environment and ``step``, a vector step whose rewards or
-    (floating-point) observations hold NaN or infinity: the environment's fault, which would
-    otherwise reach the updates and read as diverged training. One ``isfinite`` pass over the
-    rewards and one over the observations (none for integer images); the last observations of
-    the episodes that ended (``final_obs``) are checked too."""
-    floats = isinstance(obs, np.ndarray) and obs.dtype.kind == "f"
-    if np.isfinite(rewards).all() and not final_obs and (not floats or np.isfinite(obs).all()):
-        return
-    found = _non_finite(rewards)
-    what = "a reward of"
-    if found is None:
-        what = "an observation holding"
-        found = _non_finite(obs)
-        for i, last in enumerate(final_obs or ()):
-            if found is None and last is not None:
-                at_last = _non_finite(np.asarray(last)[None])
-                found = None if at_last is None else (i, at_last[1])
-    if found is not None:
-        raise EnvError(
-            f"the environment {env_id} returned {what} {found[1]} at step {step:,} "
-            f"(environment {found[0]}); a NaN or infinite reward or observation is the "
-            "environment's to fix"
-        )
-
-
-def _non_finite(values: Any) -> tuple[int, float] | None:
-    """(row, value) of the first non-finite entry of a floating-point batch (rows: the
-    environments); None when every entry is finite or the batch holds no floats."""
-    batch = np.asarray(values)
-    if batch.dtype.kind != "f" or np.isfinite(batch).all():
-        return None
-    rows = batch.reshape(len(batch), -1)
-    row = int(np.flatnonzero(~np.isfinite(rows).all(axis=1))[0])
-    return row, float(rows[row][~np.isfinite(rows[row])][0])
 
 
 def episode_diagnostics(agent: Agent) -> dict[str, float]:
@@ -344,22 +189,6 @@ def episode_diagnostics(agent: Agent) -> dict[str, float]:
     Q-variance waits for the log interval), else its ``diagnostics()``."""
     cheap = getattr(agent, "episode_diagnostics", None)
     return cheap() if callable(cheap) else agent.diagnostics()
-
-
-def finished_episodes(info: dict[str, Any]) -> list[tuple[float, int, float | None]]:
-    """(return, length, ``info["is_success"]`` or None) of the episodes that ended this step."""
-    final = info.get("final_info")
-    if not final or "episode" not in final:
-        return []
-    ep, has_success = final["episode"], final.get("_is_success")
-    return [
-        (
-            float(ep["r"][i]),
-            int(ep["l"][i]),
-            float(final["is_success"][i]) if has_success is not None and has_success[i] else None,
-        )
-        for i in np.flatnonzero(final["_episode"])
-    ]
 
 
 def no_episode_notice(cfg: Config, step: int) -> str:
