@@ -590,7 +590,7 @@ def test_auto_gives_discrete_tasks_the_general_preset_and_keeps_table_1_selectab
         "residual",
     )
     assert (cfg.blr.target, cfg.blr.redraw, cfg.k_target, cfg.k) == ("sample", "k", "k", 10)
-    assert (cfg.blr.random_features, cfg.blr.data_weight) == (512, 100.0)
+    assert (cfg.blr.random_features, cfg.blr.data_weight) == (0, 100.0)
     assert cfg.blr.center_sample and cfg.blr.random_features_max == 0
     assert make_config("bdqn", "farsighter/Chain10-v0").blr.random_features_max == 0
     assert make_config("bdqn", "farsighter/Chain10-v0").blr.data_weight == 1.0  # Farsighter's

@@ -29,7 +29,7 @@ SHORT = {
 
 
 def _default_run(root: Path, algo: str) -> tuple[Path, Any]:
-    """A short CartPole run with the library's defaults (network sizes, random features), and
+    """A short CartPole run with the library's defaults (network sizes, posterior), and
     the agent as training left it."""
     grab = GrabAgent()
     cfg = make_config(algo, "CartPole-v1", run_dir=str(root / algo), **SHORT)
@@ -65,7 +65,7 @@ def test_a_ddqn_policy_file_holds_the_online_network_alone(runs: Any) -> None:
 def test_a_farsighter_policy_file_is_its_networks_and_one_factor_per_action(runs: Any) -> None:
     run, agent = runs["farsighter"]
     a, d = agent.head.num_actions, agent.head.dim
-    assert d > 128  # the defaults' random features widen the features past the MLP's 128
+    assert d == 128  # the defaults: the posterior over the MLP's 128 learned features
     bound = _bytes(agent.torso.state_dict()) + 4 * a * d * d + 4 * a * d + 32_000
     size = (run / POLICY_FILE).stat().st_size
     assert size <= bound, (size, bound)

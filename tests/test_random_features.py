@@ -203,7 +203,11 @@ def test_the_random_layer_widens_to_the_observation_up_to_its_cap() -> None:
     assert BLRConfig(random_features=512).random_feature_width(900) == 512  # no cap: fixed
     assert BLRConfig(random_features_max=1024).random_feature_width(900) == 0  # none stays none
     cfg = make_config(
-        "farsighter", "farsighter/DeepSea30-v0", hidden_sizes=(8,), blr__random_features_max=1024
+        "farsighter",
+        "farsighter/DeepSea30-v0",
+        hidden_sizes=(8,),
+        blr__random_features=512,
+        blr__random_features_max=1024,
     )
     space = gym.spaces.Box(0.0, 1.0, (900,), dtype=np.float32)
     torso, init_AD = seeded_torso(cfg, space, 2)

@@ -243,8 +243,8 @@ def test_settings_a_batch_cannot_take_train_alone(tmp_path: Path, tiny_config: A
     assert "adaptive k" in farsighter_seeds.supports(cfg, _box(), torch.device("cpu"))
     assert not batchable(cfg)
     assert farsighter_seeds.supports(base, _box(), torch.device("cpu")) == ""
-    defaults = tiny_config("farsighter", tmp_path, preset="general")  # random features stack
-    assert defaults.blr.random_features and batchable(defaults)
+    wide = tiny_config("farsighter", tmp_path, preset="general", blr__random_features=64)
+    assert wide.blr.random_features and batchable(wide)  # random features stack
     image = gym.spaces.Box(0, 255, (4, 84, 84), np.uint8)
     assert "image" in farsighter_seeds.supports(base, image, torch.device("cpu"))
     assert "ob2i" not in BATCHED and not batchable(tiny_config("ob2i", tmp_path))
