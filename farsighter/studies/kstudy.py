@@ -18,7 +18,6 @@ from __future__ import annotations
 
 import csv
 import dataclasses
-import shlex
 from collections.abc import Sequence
 from dataclasses import dataclass
 from pathlib import Path
@@ -285,16 +284,10 @@ def _plot_k_curve(rows: list[dict[str, Any]], file: Path) -> None:
 def command(study: dict[str, Any], out: Path) -> str:
     """The command line that runs the study saved in ``study`` (a study.json) into ``out``."""
     settings = runner.settings_of(STUDY, study)
-    line = ["farsighter", "k-study"]
-    if dataclasses.replace(settings, workers=0) == QUICK:
-        line.append("--quick")
-    else:
-        for name in ("envs", "seeds", "steps", "agents"):
-            value = getattr(settings, name)
-            if value != getattr(StudyConfig(), name):
-                values = value if isinstance(value, tuple) else (value,)
-                line += [f"--{name}", *map(str, values)]
-    return shlex.join([*line, "--out", str(out)])
+    quick = dataclasses.replace(settings, workers=0) == QUICK
+    base = QUICK if quick else StudyConfig()
+    names = ("envs", "seeds", "steps", "agents")
+    return runner.command_line("k-study", settings, base, names, quick, out)
 
 
 def _setup(envs: Sequence[str]) -> list[str]:

@@ -14,6 +14,7 @@ from __future__ import annotations
 import dataclasses
 import json
 import os
+import shlex
 import shutil
 import time
 from collections.abc import Callable, Sequence
@@ -525,6 +526,20 @@ def settings_of(study: Study, saved: dict[str, Any]) -> Any:
     fields = {f.name for f in dataclasses.fields(study.full)}
     values = {k: tuple(v) if isinstance(v, list) else v for k, v in saved.items() if k in fields}
     return dataclasses.replace(study.full, **values)
+
+
+def command_line(
+    kind: str, settings: Any, base: Any, names: Sequence[str], quick: bool, out: Path
+) -> str:
+    """``farsighter KIND [--quick] --NAME VALUE... --out OUT``: each of ``names`` whose value in
+    ``settings`` differs from ``base`` (the full or the quick form the flags start from)."""
+    line = ["farsighter", kind, *(["--quick"] if quick else [])]
+    for name in names:
+        value = getattr(settings, name)
+        if value != getattr(base, name):
+            values = value if isinstance(value, tuple) else (value,)
+            line += [f"--{name}", *map(str, values)]
+    return shlex.join([*line, "--out", str(out)])
 
 
 def _read(file: Path) -> Any:

@@ -21,7 +21,6 @@ score with a 95% bootstrap CI over seeds) and ``report.md``.
 from __future__ import annotations
 
 import csv
-import shlex
 from collections.abc import Sequence
 from dataclasses import dataclass
 from pathlib import Path
@@ -365,13 +364,8 @@ def command(study: dict[str, Any], out: Path) -> str:
     settings = runner.settings_of(STUDY, study)
     quick = settings.fraction == QUICK.fraction and settings.fraction != FULL.fraction
     base = QUICK if quick else FULL
-    line = ["farsighter", "suite", *(["--quick"] if quick else [])]
-    for name in ("set", "families", "seeds", "steps", "agents"):
-        value = getattr(settings, name)
-        if value != getattr(base, name):
-            values = value if isinstance(value, tuple) else (value,)
-            line += [f"--{name}", *map(str, values)]
-    return shlex.join([*line, "--out", str(out)])
+    names = ("set", "families", "seeds", "steps", "agents")
+    return runner.command_line("suite", settings, base, names, quick, out)
 
 
 def _references(study: SuiteConfig) -> str:

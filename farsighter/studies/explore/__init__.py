@@ -24,7 +24,6 @@ criteria), :mod:`~farsighter.studies.explore.agents` (the agents, read from ``ag
 from __future__ import annotations
 
 import dataclasses
-import shlex
 from collections.abc import Sequence
 from dataclasses import dataclass
 from pathlib import Path
@@ -233,16 +232,10 @@ def _bad_episode_log(study: StudyConfig) -> BadEpisodeLog:
 def command(study: dict[str, Any], out: Path) -> str:
     """The command line that runs the study saved in ``study`` (a study.json) into ``out``."""
     settings = runner.settings_of(STUDY, study)
-    line = ["farsighter", "explore"]
-    if dataclasses.replace(settings, workers=0) == QUICK:
-        line.append("--quick")
-    else:
-        for name in ("families", "sizes", "seeds", "steps", "episodes", "agents"):
-            value = getattr(settings, name)
-            if value != getattr(StudyConfig(), name):
-                values = value if isinstance(value, tuple) else (value,)
-                line += [f"--{name}", *map(str, values)]
-    return shlex.join([*line, "--out", str(out)])
+    quick = dataclasses.replace(settings, workers=0) == QUICK
+    base = QUICK if quick else StudyConfig()
+    names = ("families", "sizes", "seeds", "steps", "episodes", "agents")
+    return runner.command_line("explore", settings, base, names, quick, out)
 
 
 def write_outputs(out: Path, study: dict[str, Any], runs: Runs) -> None:
