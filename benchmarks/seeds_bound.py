@@ -14,7 +14,7 @@ for the second core):
 * ``update_ms``: one update of that seed's agent (median), on a replay filled with the task's
   own transitions (uniform actions);
 * ``update_ms_seed_batch``: one update of the S seeds as the library batches them
-  (:data:`farsighter.seeds.BATCHED`: each seed's products computed as it computes them alone);
+  (``Algorithm.seed_batch``: each seed's products computed as it computes them alone);
 * ``update_ms_all_rows``: one update of the same agent with S times the minibatch: the S seeds'
   rows through one network: less work than the S seeds' (one product over all rows instead of
   S smaller ones, and one set of weights for the optimizer where S seeds have S), so a time no
@@ -91,17 +91,19 @@ def filled_agent(cfg: Any, batch_size: int, transitions: int) -> Any:
 
 
 def filled_batch(cfg: Any, seeds: int, transitions: int) -> Any:
-    """The seed-batched form of the config's agent (:data:`farsighter.seeds.BATCHED`) for seeds
+    """The seed-batched form of the config's agent (``Algorithm.seed_batch``) for seeds
     1..S, each seed's streams filled with ``transitions`` uniform steps of its own environment."""
+    from farsighter.agents import build_seed_agents
     from farsighter.envs import make_vector_env
-    from farsighter.seeds import BATCHED, seed_configs
+    from farsighter.seeds import seed_configs
 
     cfgs = seed_configs(cfg, list(range(1, seeds + 1)))
     envs = [make_vector_env(c, seed=c.seed) for c in cfgs]
-    batch = BATCHED[cfg.algo].SeedBatch(
+    batch = build_seed_agents(
         cfgs,
         envs[0].single_observation_space,
         envs[0].single_action_space,
+        frame_stack=1,
         device=torch.device("cpu"),
     )
     fill(envs, cfgs, batch.observe, transitions)

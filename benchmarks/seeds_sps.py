@@ -32,6 +32,7 @@ from __future__ import annotations
 
 import argparse
 import dataclasses
+import importlib
 import json
 import sys
 import tempfile
@@ -147,26 +148,29 @@ def profile_one(
     import torch
 
     import farsighter.seeds as seeds_module
+    import farsighter.train as train_module
     from benchmarks.small_profile import phase_timer
+    from farsighter import algorithms
     from farsighter.session import RunLog
 
     torch.set_num_threads(1)
     spent: dict[str, float] = defaultdict(float)
     timed = phase_timer(spent)
 
-    batch_class = seeds_module.BATCHED[algo].SeedBatch
+    module = algorithms.get(algo).seed_batch
+    batch_class = importlib.import_module(f"farsighter.agents.{module}").SeedBatch
     for name in ("greedy", "act", "observe", "learn"):
         if hasattr(batch_class, name):  # Farsighter's act computes its forward itself
             setattr(batch_class, name, timed(name, getattr(batch_class, name)))
     RunLog.step = timed("log.step", RunLog.step)  # type: ignore[method-assign]
-    make_vector_env = seeds_module.make_vector_env
+    make_vector_env = train_module.make_vector_env
 
     def timed_envs(*args: Any, **kwargs: Any) -> Any:
         envs = make_vector_env(*args, **kwargs)
         envs.step = timed("env.step", envs.step)
         return envs
 
-    seeds_module.make_vector_env = timed_envs
+    train_module.make_vector_env = timed_envs
     with tempfile.TemporaryDirectory() as tmp:
         cfg = _config(env, steps, values, tmp, 1, algo)
         start = time.perf_counter()

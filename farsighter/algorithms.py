@@ -35,6 +35,14 @@ class Algorithm:
     """Supports adaptive k (Algorithm 1 line 7)."""
     episodic: bool = False
     """Learns from whole episodes (episodic backward update): k = 1, no stride, no recent window."""
+    fast_step: bool = False
+    """The learner may capture its update as a CUDA graph or compile it
+    (:mod:`farsighter.agents.learner`); OB2I's minibatches change size with each episode's tail
+    (a graph or a compilation per size) and NAF's update was never measured so: both run
+    eagerly."""
+    seed_batch: str = ""
+    """Module of ``farsighter.agents`` whose ``SeedBatch`` trains several seeds of it as one
+    computation (:mod:`farsighter.seeds`); '' where its seeds train one at a time."""
 
 
 TABLE: tuple[Algorithm, ...] = (
@@ -42,13 +50,17 @@ TABLE: tuple[Algorithm, ...] = (
         "ddqn",
         "double DQN with epsilon-greedy exploration (section 3.2)",
         agent="ddqn",
+        seed_batch="ddqn_seeds",
         actions="discrete",
+        fast_step=True,
     ),
     Algorithm(
         "kddqn",
         "double DQN with k-step returns (section 5.2 baselines)",
         agent="ddqn",
+        seed_batch="ddqn_seeds",
         actions="discrete",
+        fast_step=True,
         defaults={"k": 3},
     ),
     Algorithm(
@@ -56,7 +68,9 @@ TABLE: tuple[Algorithm, ...] = (
         "Thompson sampling on a Bayesian linear regression Q-head, 1-step (section 4.2)",
         bayesian=True,
         agent="farsighter",
+        seed_batch="farsighter_seeds",
         actions="discrete",
+        fast_step=True,
         # A new weight draw every T^sample = 1,000 steps as in Azizzadenesheli et al. (2018);
         # the bdqn preset (the authors' code) and --blr.redraw change it.
         defaults={"k": 1, "blr.redraw": "every", "blr.redraw_every": 1_000},
@@ -66,7 +80,9 @@ TABLE: tuple[Algorithm, ...] = (
         "Thompson draw every step over k-step returns from recent transitions (Algorithms 1-2)",
         bayesian=True,
         agent="farsighter",
+        seed_batch="farsighter_seeds",
         actions="discrete",
+        fast_step=True,
         # Fresh draw every step (Algorithm 2), k-step returns, minibatches from the latest N
         # transitions (Algorithm 1 line 4). k = 10 is the smallest k of Figure 4.
         defaults={"k": 10, "blr.redraw": "step", "sample_recent": True},
@@ -86,13 +102,17 @@ TABLE: tuple[Algorithm, ...] = (
         "rnd",
         "double DQN with a random-network-distillation bonus (appendix 9.1.1)",
         agent="rnd",
+        seed_batch="rnd_seeds",
         actions="discrete",
+        fast_step=True,
     ),
     Algorithm(
         "krnd",
         "RND with k-step returns, TD(K)+RND (appendix 9.1.1)",
         agent="rnd",
+        seed_batch="rnd_seeds",
         actions="discrete",
+        fast_step=True,
         defaults={"k": 3},
     ),
     # The continuous agents' TD loss is the squared error of Gu et al. (2016) / Algorithm 3 line 9.
@@ -140,6 +160,11 @@ NAMES: tuple[str, ...] = tuple(ALGORITHMS)
 def names_for(actions: Literal["discrete", "continuous"]) -> tuple[str, ...]:
     """The algorithms for one kind of action space, in table order."""
     return tuple(a.name for a in TABLE if a.actions == actions)
+
+
+def seed_batched() -> tuple[str, ...]:
+    """The algorithms whose seeds train as one computation (:attr:`Algorithm.seed_batch`)."""
+    return tuple(a.name for a in TABLE if a.seed_batch)
 
 
 def accepted(names: tuple[str, ...] = NAMES) -> str:

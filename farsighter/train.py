@@ -1,17 +1,21 @@
-"""The one training loop: any agent, any environment, resumable from its run directory."""
+"""The one training loop: any agent, any environment, one seed or several in one process,
+resumable from its run directories (:func:`run_seeds`; :func:`train` for a run alone,
+:func:`farsighter.seeds.train_seeds` for seeds)."""
 
 from __future__ import annotations
 
 import sys
 from collections.abc import Sequence
+from dataclasses import dataclass, replace
 from pathlib import Path
 from typing import Any
 
 import gymnasium as gym
 import numpy as np
 import torch
+from tqdm import tqdm
 
-from farsighter.agents import Agent, build_agent
+from farsighter.agents import Agent, SeedAgents, build_agent, build_seed_agents
 from farsighter.agents.cuda_graph import check_compiler, graphs_enabled
 from farsighter.config import Config, load_config, validate
 from farsighter.envs import check_spaces, frame_stack_of, make_env, make_vector_env
@@ -130,53 +134,139 @@ def train(cfg: Config, callbacks: Sequence[Callback] = ()) -> dict[str, Any]:
         done = nothing_to_resume(cfg, checkpoint)
         if done is not None:
             return done
-    envs: gym.vector.VectorEnv = make_vector_env(
-        cfg, seed=cfg.seed
-    )  # a bad id fails before the run dir is touched
-    obs_space, act_space = envs.single_observation_space, envs.single_action_space
-    check_spaces(cfg.algo, obs_space, act_space)
-    obs_shape = tuple(obs_space.shape or ())
-    width = cfg.blr.random_feature_width(int(np.prod(obs_shape)))
-    note = random_features_note(width, obs_shape, cfg.env)
-    if note:
-        print(note, file=sys.stderr)
-    overlap = overlap_enabled(cfg.runtime.overlap_env, envs, device)
-    stop_before_start()  # Ctrl-C while the environments were made: the run directory untouched
-    path = prepare_run_dir(cfg)
-    prepare_process(cfg.runtime.torch_threads)
-    agent = build_agent(cfg, obs_space, act_space, frame_stack=frame_stack_of(cfg), device=device)
-    if checkpoint is not None:
-        state, envs, obs = restore_run(path, cfg, agent, envs, checkpoint)
-        checkpoint = None  # its replay is in the agent now: not held twice
-    else:
-        state, (obs, _) = LoopState(), envs.reset(seed=cfg.seed)
-    async_envs: Any = envs  # with overlap: step_async / step_wait (overlap_enabled checked them)
-    log = RunLog(path, cfg, state, resumed=cfg.resume, callbacks=callbacks)
+    checkpoints, checkpoint = [checkpoint], None  # run_seeds lets go of it once loaded
+    return run_seeds([cfg], [callbacks], device, checkpoints)[0]
+
+
+@dataclass
+class _Seed:
+    """One seed's part of the loop: its environments, observation, counters and run log."""
+
+    cfg: Config
+    path: Path
+    envs: Any
+    obs: Any
+    state: LoopState
+    log: RunLog
+    callbacks: Sequence[Callback]
+
+
+def run_seeds(
+    cfgs: Sequence[Config],
+    callbacks: Sequence[Sequence[Callback]],
+    device: torch.device,
+    checkpoints: list[dict[str, Any] | None] | None = None,
+) -> list[dict[str, Any]]:
+    """The one training loop: S seeds of one config (``cfgs``, checked; S = 1 for a run alone)
+    step their own environments, and their agents (:func:`build_seed_agents`) act, record and
+    learn together; each seed keeps its own run directory, log, checkpoints and summary.
+    ``checkpoints[i]``: seed i's checkpoint when a resume has read it already (emptied once it
+    is loaded, so that its replay is not held twice)."""
+    cfg, S = cfgs[0], len(cfgs)
+    agents, runs, overlap = _start(cfgs, callbacks, device, checkpoints)
+    step = runs[0].state.global_step
+    bar = tqdm(
+        total=cfg.total_steps * S,
+        initial=step * S,
+        unit="step",
+        disable=not cfg.progress or S == 1,
+        dynamic_ncols=True,
+        mininterval=1.0,
+        desc=f"{cfg.algo} {cfg.env} {S} seeds",
+    )
+    members = [agents.member(s) for s in range(S)]
     try:
-        while state.global_step < cfg.total_steps:
-            actions = agent.act(obs, state.global_step)
-            prev_step, state.global_step = state.global_step, state.global_step + cfg.num_envs
+        while step < cfg.total_steps:
+            actions_S = agents.act([run.obs for run in runs], step)
+            prev, step = step, step + cfg.num_envs
             if overlap:  # the games step on their threads while the updates owed are made
-                async_envs.step_async(actions)
-                metrics = agent.learn(state.global_step)
-                next_obs, rewards, terminated, truncated, info = async_envs.step_wait()
+                for run, actions in zip(runs, actions_S, strict=True):
+                    run.envs.step_async(actions)
+                metrics = agents.learn(step)
+                results = [run.envs.step_wait() for run in runs]
             else:
-                next_obs, rewards, terminated, truncated, info = envs.step(actions)
-            final_obs = final_observations(info, cfg.num_envs)
-            check_transition(cfg.env, state.global_step, rewards, next_obs, final_obs)
-            agent.observe(VectorStep(obs, actions, rewards, terminated, truncated, final_obs))
-            obs = next_obs
+                results = [run.envs.step(a) for run, a in zip(runs, actions_S, strict=True)]
+            infos, steps = [], []
+            for run, actions, result in zip(runs, actions_S, results, strict=True):
+                next_obs, rewards, terminated, truncated, info = result
+                final = final_observations(info, cfg.num_envs)
+                check_transition(run.cfg.env, step, rewards, next_obs, final)
+                steps.append(VectorStep(run.obs, actions, rewards, terminated, truncated, final))
+                run.obs = next_obs
+                infos.append(info)
+            agents.observe(steps)
             if not overlap:
-                metrics = agent.learn(state.global_step)
-            log.after_step(state, prev_step, info, metrics, agent, envs, obs, callbacks)
-            if requested() and state.global_step < cfg.total_steps:  # SIGINT / SIGTERM
-                log.checkpoint(state, agent, envs, obs)
-                raise interrupted(state.global_step, str(path))
-        log.finish(state, agent, envs, obs, callbacks)
+                metrics = agents.learn(step)
+            for run, member, info, mine in zip(runs, members, infos, metrics, strict=True):
+                run.state.global_step = step
+                run.log.after_step(
+                    run.state, prev, info, mine, member, run.envs, run.obs, run.callbacks
+                )
+            bar.update(cfg.num_envs * S)
+            if requested() and step < cfg.total_steps:  # SIGINT / SIGTERM: every seed saved
+                for run, member in zip(runs, members, strict=True):
+                    run.log.checkpoint(run.state, member, run.envs, run.obs)
+                raise interrupted(step, ", ".join(str(run.path) for run in runs))
+        for run, member in zip(runs, members, strict=True):
+            run.log.finish(run.state, member, run.envs, run.obs, run.callbacks)
+        return [run.log.summary(run.state) for run in runs]
     finally:
-        log.close()
-        envs.close()
-    return log.summary(state)
+        bar.close()
+        for run in runs:
+            run.log.close()
+            run.envs.close()
+
+
+def _start(
+    cfgs: Sequence[Config],
+    callbacks: Sequence[Sequence[Callback]],
+    device: torch.device,
+    checkpoints: list[dict[str, Any] | None] | None,
+) -> tuple[SeedAgents, list[_Seed], bool]:
+    """:func:`run_seeds`' start: the seeds' environments (checked before a run directory is
+    touched), run directories, agents, restored checkpoints and run logs; whether the loop
+    steps the environments while it learns (:func:`overlap_enabled`)."""
+    cfg, S = cfgs[0], len(cfgs)
+    envs: list[gym.vector.VectorEnv] = []
+    runs: list[_Seed] = []
+    try:
+        for c in cfgs:  # a bad id fails before a run directory is touched
+            envs.append(make_vector_env(c, seed=c.seed))
+            check_spaces(c.algo, envs[-1].single_observation_space, envs[-1].single_action_space)
+        obs_space, act_space = envs[0].single_observation_space, envs[0].single_action_space
+        obs_shape = tuple(obs_space.shape or ())
+        note = random_features_note(
+            cfg.blr.random_feature_width(int(np.prod(obs_shape))), obs_shape, cfg.env
+        )
+        if note:
+            print(note, file=sys.stderr)
+        overlap = overlap_enabled(cfg.runtime.overlap_env, envs[0], device)
+        stop_before_start()  # Ctrl-C while the environments were made: run directories untouched
+        paths = [prepare_run_dir(c) for c in cfgs]
+        prepare_process(cfg.runtime.torch_threads)
+        agents = build_seed_agents(
+            cfgs, obs_space, act_space, frame_stack=frame_stack_of(cfg), device=device
+        )
+        for s, (c, path, hooks) in enumerate(zip(cfgs, paths, callbacks, strict=True)):
+            member = agents.member(s)
+            if c.resume:
+                saved = checkpoints[s] if checkpoints else None
+                if checkpoints:
+                    checkpoints[s] = None
+                state, envs[s], obs = restore_run(path, c, member, envs[s], saved)
+                saved = None
+            else:
+                state, (obs, _) = LoopState(), envs[s].reset(seed=c.seed)
+            # one progress bar: the run's own, or the batch's below
+            log = RunLog(path, c if S == 1 else replace(c, progress=False), state, c.resume, hooks)
+            runs.append(_Seed(c, path, envs[s], obs, state, log, hooks))
+    except BaseException:  # what was opened so far (the logs' W&B runs end as failed)
+        for run in runs:
+            run.log.close()
+        for env in envs:
+            env.close()
+        raise
+    return agents, runs, overlap
 
 
 class Policy:

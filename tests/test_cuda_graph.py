@@ -106,9 +106,7 @@ def test_cuda_graph_setting_is_checked() -> None:
     validate(make_config("farsighter", "CartPole-v1", cuda_graph="on"))  # the defaults
     with pytest.raises(ConfigError, match="does not combine with blr.optimism until-reward"):
         validate(
-            make_config(
-                "farsighter", "CartPole-v1", cuda_graph="on", blr__optimism="until-reward"
-            )
+            make_config("farsighter", "CartPole-v1", cuda_graph="on", blr__optimism="until-reward")
         )
     with pytest.raises(ConfigError, match="needs a CUDA device"):  # ... until it resolves to CPU
         graphs_enabled("on", torch.device("cpu"), supported=True)

@@ -39,6 +39,7 @@ def _sigint_delivered() -> Any:
     yield
     signal.signal(signal.SIGINT, previous)
 
+
 LONG = [
     *("--algo", "ddqn", "--env", "CartPole-v1", "--preset", "control"),
     *("--total-steps", "1000000", "--learning-starts", "100", "--checkpoint-every", "1000000"),

@@ -43,7 +43,7 @@ def test_a_local_ray_listens_on_loopback_only() -> None:
     psutil = pytest.importorskip("psutil")  # Ray ships it
     if ray.is_initialized():
         ray.shutdown()
-    ray_init(Backend(ray=True))
+    ray_init(Backend(ray=True).address)
     try:
 
         @ray.remote(num_cpus=0)

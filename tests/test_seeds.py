@@ -19,12 +19,13 @@ import torch
 import torch.nn.functional as F
 
 from farsighter.agents import farsighter_seeds
+from farsighter.algorithms import seed_batched
 from farsighter.cli import main
 from farsighter.config.presets import PREVIOUS_GENERAL_FARSIGHTER
 from farsighter.errors import ConfigError
 from farsighter.replay import ReplayBuffer
 from farsighter.replay.seeds import SeedReplay
-from farsighter.seeds import BATCHED, batchable, seed_configs, train_seeds
+from farsighter.seeds import batchable, seed_configs, train_seeds
 from farsighter.stacked import stacked_linear
 from farsighter.train import train
 
@@ -247,7 +248,7 @@ def test_settings_a_batch_cannot_take_train_alone(tmp_path: Path, tiny_config: A
     assert wide.blr.random_features and batchable(wide)  # random features stack
     image = gym.spaces.Box(0, 255, (4, 84, 84), np.uint8)
     assert "image" in farsighter_seeds.supports(base, image, torch.device("cpu"))
-    assert "ob2i" not in BATCHED and not batchable(tiny_config("ob2i", tmp_path))
+    assert "ob2i" not in seed_batched() and not batchable(tiny_config("ob2i", tmp_path))
 
 
 def _box() -> gym.spaces.Box:

@@ -7,16 +7,25 @@ drives. Which module trains which algorithm is in :mod:`farsighter.algorithms`.
 from __future__ import annotations
 
 import importlib
+from collections.abc import Sequence
 
 import gymnasium as gym
 import torch
 
 from farsighter import algorithms
-from farsighter.agents.protocol import Agent, AgentFactory
+from farsighter.agents.protocol import Agent, AgentFactory, Alone, LearningAgent, SeedAgents
 from farsighter.config import Config
 from farsighter.networks import set_precision
 
-__all__ = ["Agent", "AgentFactory", "build_agent"]
+__all__ = [
+    "Agent",
+    "AgentFactory",
+    "Alone",
+    "LearningAgent",
+    "SeedAgents",
+    "build_agent",
+    "build_seed_agents",
+]
 
 
 def build_agent(
@@ -26,7 +35,7 @@ def build_agent(
     *,
     frame_stack: int,
     device: torch.device,
-) -> Agent:
+) -> LearningAgent:
     """The agent of ``cfg.algo`` (its module of the algorithm table is imported on first use)."""
     spec = algorithms.get(cfg.algo)
     if not isinstance(obs_space, gym.spaces.Box):  # farsighter.envs.check_spaces says why
@@ -36,6 +45,28 @@ def build_agent(
     for net in networks(agent):
         set_precision(net, cfg.runtime.precision)
     return agent
+
+
+def build_seed_agents(
+    cfgs: Sequence[Config],
+    obs_space: gym.Space,
+    act_space: gym.Space,
+    *,
+    frame_stack: int,
+    device: torch.device,
+) -> SeedAgents:
+    """The seeds of ``cfgs`` (one config but for seed and run directory) as the loop drives
+    them: one agent alone (:class:`Alone`) for one config, else the algorithm's seed-batched
+    form (``Algorithm.seed_batch``; :func:`farsighter.seeds.train_seeds` checks it applies)."""
+    if len(cfgs) == 1:
+        return Alone(
+            build_agent(cfgs[0], obs_space, act_space, frame_stack=frame_stack, device=device)
+        )
+    module = algorithms.get(cfgs[0].algo).seed_batch
+    if not module:
+        raise ValueError(f"{cfgs[0].algo} has no seed-batched form")
+    batch = importlib.import_module(f"farsighter.agents.{module}").SeedBatch
+    return batch(cfgs, obs_space, act_space, device=device)  # type: ignore[no-any-return]
 
 
 def networks(agent: object) -> list[torch.nn.Module]:

@@ -12,7 +12,9 @@ writes: a seed started in a batch can be resumed alone, and the other way round.
 
 from __future__ import annotations
 
+import dataclasses
 from collections.abc import Sequence
+from typing import Any
 
 import gymnasium as gym
 import numpy as np
@@ -26,22 +28,22 @@ from farsighter.agents.common import (
     elementwise_td_loss,
     make_optimizer,
     minibatch_args,
+    obs_tensor,
     sync_target,
     updates_owed,
 )
-from farsighter.agents.seed_members import SeedMember, seed_replay, stack_refusal
+from farsighter.agents.seed_members import Member, seed_replay, stack_refusal
 from farsighter.config import Config
-from farsighter.exploration.epsilon import epsilon_draws, linear_schedule
+from farsighter.exploration.epsilon import epsilon_draws, epsilon_greedy, linear_schedule
 from farsighter.networks import QNetwork
 from farsighter.ops.targets import double_q_target
 from farsighter.replay import Batch, VectorStep
 from farsighter.stacked import (
     StackedQNetwork,
     clip_per_seed,
+    load_member_optimizer_state,
+    member_optimizer_state,
 )
-
-ALGOS = ("ddqn", "kddqn")
-"""The algorithms with a seed-batched form."""
 
 
 def supports(cfg: Config, obs_space: gym.Space | None, device: torch.device) -> str:
@@ -93,9 +95,9 @@ class SeedBatchDDQN:
                 .numpy()
             )
 
-    def act(self, obs_SE: np.ndarray, global_step: int) -> np.ndarray:
+    def act(self, obs_S: Sequence[np.ndarray], global_step: int) -> np.ndarray:
         """Each seed's epsilon-greedy actions from its own generator, (S, E)."""
-        cfg = self.cfg
+        cfg, obs_SE = self.cfg, np.stack(obs_S)
         self.epsilon = linear_schedule(cfg.eps_start, cfg.eps_end, cfg.eps_decay_steps, global_step)
         greedy_SE = self.greedy(obs_SE)  # draws nothing: the generators see what they see alone
         n = obs_SE.shape[1]
@@ -164,5 +166,58 @@ class SeedBatchDDQN:
         return SeedMember(self, s)
 
 
+class SeedMember(Member):
+    """A seed of :class:`~farsighter.agents.ddqn_seeds.SeedBatchDDQN`: ``DDQNAgent`` alone."""
+
+    batch: SeedBatchDDQN
+
+    def q_mean(self, obs_B: np.ndarray) -> torch.Tensor:
+        """Q(s, .) of this seed's network, (B, A)."""
+        b = self.batch
+        return b.q.member_forward(obs_tensor(np.asarray(obs_B), b.device), self.s)
+
+    def explore(self, obs_E: np.ndarray, global_step: int) -> np.ndarray:
+        """Epsilon-greedy from this seed's generator (``DDQNAgent.act``)."""
+        cfg, b = self.cfg, self.batch
+        eps = linear_schedule(cfg.eps_start, cfg.eps_end, cfg.eps_decay_steps, global_step)
+        greedy = lambda: self.greedy(obs_E)  # noqa: E731
+        return epsilon_greedy(b.rngs[self.s], eps, b.num_actions, greedy, len(obs_E))
+
+    @torch.no_grad()
+    def q_estimate(self, obs_B: np.ndarray) -> tuple[np.ndarray, np.ndarray | None]:
+        return self.q_mean(obs_B).cpu().numpy(), None
+
+    def diagnostics(self) -> dict[str, float]:
+        return {"epsilon": self.batch.epsilon, "k": float(self.batch.counters.k)}
+
+    def state_dict(self, include_replay: bool = True) -> dict[str, Any]:
+        """The checkpoint of ``DDQNAgent`` alone, for this seed."""
+        b, s = self.batch, self.s
+        return {
+            "q": b.q.member_state(s),
+            "q_target": b.q_target.member_state(s),
+            "opt": member_optimizer_state(b.opt, s),
+            "rng": b.rngs[s].bit_generator.state,
+            "counters": dataclasses.asdict(b.counters),
+            "replay": b.replay.member_state(s) if include_replay else None,
+        }
+
+    def load_state_dict(self, state: dict[str, Any]) -> None:
+        """A checkpoint of this seed (written alone or in a batch). Seeds resume together only
+        from checkpoints with the same counters (:func:`farsighter.seeds.train_seeds` groups
+        them so)."""
+        b, s = self.batch, self.s
+        b.q.load_member(s, state["q"])
+        b.q_target.load_member(s, state["q_target"])
+        load_member_optimizer_state(b.opt, s, state["opt"])
+        b.rngs[s].bit_generator.state = state["rng"]
+        for key, value in state["counters"].items():  # equal for every seed of a batch
+            setattr(b.counters, key, value)
+        if state.get("replay") is not None:
+            b.replay.load_member(s, state["replay"])
+        else:
+            b.counters.hold_pending = True
+
+
 SeedBatch = SeedBatchDDQN
-"""The batch class :mod:`farsighter.seeds` builds for this module's algorithms."""
+"""The batch class :func:`farsighter.agents.build_seed_agents` builds (``Algorithm.seed_batch``)."""

@@ -30,7 +30,7 @@ from farsighter.agents.common import (
     updates_owed,
 )
 from farsighter.agents.cuda_graph import Tensors
-from farsighter.agents.farsighter_parts import NextFeatures, SeedParts
+from farsighter.agents.farsighter_parts import FarsighterSeedMember, NextFeatures, SeedParts
 from farsighter.agents.farsighter_posterior import (
     accumulate,
     refresh_posterior,
@@ -44,18 +44,18 @@ from farsighter.agents.farsighter_targets import (
     q_taken,
     uses_one_step,
 )
-from farsighter.agents.seed_members import FarsighterSeedMember, seed_replay, stack_refusal
+from farsighter.agents.seed_members import seed_replay, stack_refusal
 from farsighter.config import Config
 from farsighter.exploration import optimism
 from farsighter.replay import Batch, VectorStep
-from farsighter.stacked import StackedQNetwork, clip_per_seed
+from farsighter.stacked import (
+    StackedQNetwork,
+    clip_per_seed,
+)
 
 Features = dict[str, tuple[torch.Tensor, NextFeatures]]
 """phi(s') and phi_target(s') of every seed, (S, B, D) each (phi_target a list of S from the
 target caches), of the k-step windows ('') and the one-step windows ('one_') of k_target max."""
-
-ALGOS = ("farsighter", "bdqn")
-"""The Bayesian algorithms with a seed-batched form."""
 
 
 def supports(cfg: Config, obs_space: gym.Space | None, device: torch.device) -> str:
@@ -105,9 +105,10 @@ class SeedBatchFarsighter:
         return len(self.cfgs)
 
     # ------------------------------------------------------------------ acting
-    def act(self, obs_SE: np.ndarray, global_step: int) -> np.ndarray:
+    def act(self, obs_S: Sequence[np.ndarray], global_step: int) -> np.ndarray:
         """Each seed's actions, (S, E): uniform from its generator before ``learning_starts``,
         then Thompson sampling under its own draws (Algorithm 2)."""
+        obs_SE = np.stack(obs_S)
         n = obs_SE.shape[1]
         if global_step < self.cfg.learning_starts:
             if self.records:  # uniform actions are all exploratory
@@ -290,4 +291,4 @@ class SeedBatchFarsighter:
 
 
 SeedBatch = SeedBatchFarsighter
-"""The batch class :mod:`farsighter.seeds` builds for this module's algorithms."""
+"""The batch class :func:`farsighter.agents.build_seed_agents` builds (``Algorithm.seed_batch``)."""

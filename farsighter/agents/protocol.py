@@ -1,12 +1,17 @@
 """The contract between the training loop and every agent, checked by mypy.
 
-Each agent module ends with ``AGENT: AgentFactory = ItsClass``; mypy then checks the class's
-constructor against :class:`AgentFactory` and its instances against :class:`Agent`. Arrays
-carry their shape in a suffix: E environments, B rows, A actions.
+The loop drives :class:`SeedAgents`: S seeds of one config (S = 1 for a run alone) that act,
+record steps and learn together. One seed of them is an :class:`Agent`, the surface the run log,
+evaluation, callbacks, checkpoints and a loaded policy use. An agent class that trains one seed
+is a :class:`LearningAgent` (an Agent that also records steps and learns); each such module ends
+with ``AGENT: AgentFactory = ItsClass``, and mypy checks the class's constructor against
+:class:`AgentFactory` and its instances against the protocol. Arrays carry their shape in a
+suffix: S seeds, E environments, B rows, A actions.
 """
 
 from __future__ import annotations
 
+from collections.abc import Sequence
 from typing import Any, Protocol
 
 import gymnasium as gym
@@ -18,20 +23,11 @@ from farsighter.replay import VectorStep
 
 
 class Agent(Protocol):
-    """What the loop, evaluation and the studies use of an agent."""
+    """One seed: what the run log, evaluation, callbacks and the studies use of an agent."""
 
     def act(self, obs_E: np.ndarray, global_step: int, explore: bool = True) -> np.ndarray:
         """Actions for a batch of environments; ``explore=False`` is the evaluation policy
         (greedy, or greedy under the posterior mean)."""
-        ...
-
-    def observe(self, step: VectorStep) -> None:
-        """Record one step of every environment."""
-        ...
-
-    def learn(self, global_step: int) -> dict[str, torch.Tensor]:
-        """Make the updates owed at ``global_step`` (the agent keeps its own cadences); returns
-        the latest losses as tensors (the loop reads them once per log interval)."""
         ...
 
     def diagnostics(self) -> dict[str, float]:
@@ -51,6 +47,65 @@ class Agent(Protocol):
     def load_state_dict(self, state: dict[str, Any]) -> None: ...
 
 
+class LearningAgent(Agent, Protocol):
+    """An agent of one seed that trains: it also records steps and learns."""
+
+    def observe(self, step: VectorStep) -> None:
+        """Record one step of every environment."""
+        ...
+
+    def learn(self, global_step: int) -> dict[str, torch.Tensor]:
+        """Make the updates owed at ``global_step`` (the agent keeps its own cadences); returns
+        the latest losses as tensors (the loop reads them once per log interval)."""
+        ...
+
+
+class SeedAgents(Protocol):
+    """S seeds of one config as the training loop drives them (:func:`farsighter.train.train`,
+    :func:`farsighter.seeds.train_seeds`)."""
+
+    @property
+    def seeds(self) -> int: ...
+
+    def act(self, obs_S: Sequence[np.ndarray], global_step: int) -> Sequence[np.ndarray]:
+        """Each seed's exploring actions for its own environments' observations."""
+        ...
+
+    def observe(self, steps: Sequence[VectorStep]) -> None:
+        """One vector step of every seed, in seed order."""
+        ...
+
+    def learn(self, global_step: int) -> list[dict[str, torch.Tensor]]:
+        """The updates owed at ``global_step``; each seed's latest losses."""
+        ...
+
+    def member(self, s: int) -> Agent:
+        """Seed ``s`` as an agent (its checkpoint is the one its run alone writes)."""
+        ...
+
+
+class Alone:
+    """One :class:`LearningAgent` as :class:`SeedAgents` of one seed: how a run alone, and each
+    seed of an algorithm without a seed-batched form, is trained."""
+
+    seeds = 1
+
+    def __init__(self, agent: LearningAgent) -> None:
+        self.agent = agent
+
+    def act(self, obs_S: Sequence[np.ndarray], global_step: int) -> list[np.ndarray]:
+        return [self.agent.act(obs_S[0], global_step)]
+
+    def observe(self, steps: Sequence[VectorStep]) -> None:
+        self.agent.observe(steps[0])
+
+    def learn(self, global_step: int) -> list[dict[str, torch.Tensor]]:
+        return [self.agent.learn(global_step)]
+
+    def member(self, s: int) -> LearningAgent:
+        return self.agent
+
+
 class AgentFactory(Protocol):
     """An agent class: how :func:`farsighter.agents.build_agent` constructs every agent."""
 
@@ -62,4 +117,4 @@ class AgentFactory(Protocol):
         *,
         frame_stack: int,
         device: torch.device,
-    ) -> Agent: ...
+    ) -> LearningAgent: ...

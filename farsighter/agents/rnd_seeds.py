@@ -13,23 +13,21 @@ trains it alone (``tests/test_seeds.py``).
 
 from __future__ import annotations
 
+import copy
 import dataclasses
 from collections.abc import Sequence
+from typing import Any
 
 import gymnasium as gym
 import torch
 
 from farsighter.agents.common import TensorBatch
-from farsighter.agents.ddqn_seeds import SeedBatchDDQN, supports
+from farsighter.agents.ddqn_seeds import SeedBatchDDQN, SeedMember, supports
 from farsighter.agents.rnd import make_bonus
-from farsighter.agents.seed_members import RNDSeedMember
 from farsighter.config import Config
 from farsighter.replay import Batch, VectorStep
 
-ALGOS = ("rnd", "krnd")
-"""The algorithms with a seed-batched form here."""
-
-__all__ = ["ALGOS", "SeedBatch", "SeedBatchRND", "supports"]
+__all__ = ["SeedBatch", "SeedBatchRND", "supports"]
 
 
 class SeedBatchRND(SeedBatchDDQN):
@@ -79,5 +77,42 @@ class SeedBatchRND(SeedBatchDDQN):
         return RNDSeedMember(self, s)
 
 
+class RNDSeedMember(SeedMember):
+    """A seed of :class:`~farsighter.agents.rnd_seeds.SeedBatchRND`: ``RNDAgent`` alone."""
+
+    batch: SeedBatchRND
+
+    def diagnostics(self) -> dict[str, float]:
+        bonus = self.batch.bonuses[self.s]
+        return {
+            **super().diagnostics(),
+            "intrinsic_reward": bonus.stats["intrinsic_reward"],
+            "intrinsic_std": float(bonus.intrinsic_rms.std),
+            "predictor_loss": bonus.stats["predictor_loss"],
+        }
+
+    def state_dict(self, include_replay: bool = True) -> dict[str, Any]:
+        """The checkpoint of ``RNDAgent`` alone, for this seed."""
+        bonus = self.batch.bonuses[self.s]
+        return {
+            **super().state_dict(include_replay),
+            **{key: getattr(bonus, key).state_dict() for key in RND_STATEFUL},
+            "epsilon": self.batch.epsilon,
+            "stats": dict(bonus.stats),
+        }
+
+    def load_state_dict(self, state: dict[str, Any]) -> None:
+        super().load_state_dict(state)
+        bonus = self.batch.bonuses[self.s]
+        for key in RND_STATEFUL:  # copies: never the caller's tensors (as load_state does)
+            getattr(bonus, key).load_state_dict(copy.deepcopy(state[key]))
+        bonus.stats = dict(state["stats"])
+        self.batch.epsilon = state["epsilon"]
+
+
+RND_STATEFUL = ("rnd_target", "predictor", "rnd_opt", "obs_rms", "intrinsic_rms")
+"""The pieces of an RND bonus saved by their ``state_dict`` (``RNDAgent``'s keys)."""
+
+
 SeedBatch = SeedBatchRND
-"""The batch class :mod:`farsighter.seeds` builds for this module's algorithms."""
+"""The batch class :func:`farsighter.agents.build_seed_agents` builds (``Algorithm.seed_batch``)."""

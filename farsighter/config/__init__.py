@@ -16,7 +16,7 @@ The pieces: :mod:`~farsighter.config.fields` (the dataclasses), :mod:`~farsighte
 :mod:`~farsighter.config.files` (JSON in run directories).
 """
 
-from farsighter.config.checks import STEP_AGENTS, validate
+from farsighter.config.checks import validate
 from farsighter.config.env_ids import env_id_of, make_config
 from farsighter.config.fields import (
     AdaptiveKConfig,
@@ -41,7 +41,6 @@ from farsighter.config.presets import (
 
 __all__ = [
     "PRESETS",
-    "STEP_AGENTS",
     "AdaptiveKConfig",
     "AtariConfig",
     "BLRConfig",

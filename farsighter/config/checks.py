@@ -26,16 +26,10 @@ def validate(cfg: Config) -> None:
             raise ConfigError(f"{name} must be a finite number (got {value})")
 
 
-STEP_AGENTS = ("ddqn", "farsighter", "rnd")
-"""Agents whose update the learner may capture as a CUDA graph or compile
-(farsighter.agents.learner); OB2I's minibatches change size with each episode's tail (a graph or
-a compilation per size) and NAF's update was never measured so: both run eagerly."""
-
-
 def _algorithm_checks(cfg: Config, spec: algorithms.Algorithm) -> list[tuple[bool, str]]:
     """What the algorithm table allows, and the values that span sections."""
     adaptive = " and ".join(a.name for a in algorithms.TABLE if a.adaptive_k)
-    step_algos = ", ".join(a.name for a in algorithms.TABLE if a.agent in STEP_AGENTS)
+    step_algos = ", ".join(a.name for a in algorithms.TABLE if a.fast_step)
     ak, n = cfg.adaptive_k, cfg.naf
     return [
         (
@@ -53,11 +47,11 @@ def _algorithm_checks(cfg: Config, spec: algorithms.Algorithm) -> list[tuple[boo
             f"adaptive_k.enabled is only supported by --algo {adaptive}",
         ),
         (
-            cfg.runtime.cuda_graph != "on" or spec.agent in STEP_AGENTS,
+            cfg.runtime.cuda_graph != "on" or spec.fast_step,
             f"cuda_graph on is supported by --algo {step_algos}; use auto or off",
         ),
         (
-            not cfg.runtime.compile or spec.agent in STEP_AGENTS,
+            not cfg.runtime.compile or spec.fast_step,
             f"compile is supported by --algo {step_algos}",
         ),
         (

@@ -26,7 +26,7 @@ import numpy as np
 import tyro
 
 from farsighter import algorithms
-from farsighter.config import STEP_AGENTS, Config, is_minatar_id
+from farsighter.config import Config, is_minatar_id
 from farsighter.envs.atari import ATARI_49, TABLE2, ale_id, game_of
 from farsighter.envs.atari_scores import human_normalized
 from farsighter.envs.minatar import MINATAR_GAMES, minatar_id
@@ -43,7 +43,7 @@ AGENTS: tuple[Agent, ...] = (
     Agent("OB2I", "ob2i"),
     Agent("k-DDQN", "kddqn"),
 )
-COMPILED = tuple(a.name for a in algorithms.TABLE if a.agent in STEP_AGENTS)
+COMPILED = tuple(a.name for a in algorithms.TABLE if a.fast_step)
 """Algorithms whose update --compile compiles (the others run eagerly)."""
 PAPER_COLUMN = {"DDQN": "ddqn", "BDQN": "bdqn", "Farsighter": "farsighter", "OB2I": "ob2i"}
 

@@ -11,6 +11,7 @@ from typing import Any
 
 import numpy as np
 
+from farsighter import algorithms
 from farsighter.envs.maze import DEFAULT_MAX_EPISODE_STEPS, ENV_ID
 from farsighter.envs.maze import DEFAULT_START_VALUE as Q_STAR
 from farsighter.plots import band, figure, finish_axes, markdown_table
@@ -46,15 +47,17 @@ PER_SEED_METRICS = (
 # What an agent's own uncertainty at the start state is: two estimators that are not comparable,
 # so the table names it per row and no claim ranks that column across estimators.
 ESTIMATORS: dict[str, str] = {
-    "bdqn": "BLR phi^T Cov phi",
-    "farsighter": "BLR phi^T Cov phi",
+    "farsighter": "BLR phi^T Cov phi",  # Farsighter and BDQN
     "ob2i": "variance over heads",
 }
+"""Agent module (``Algorithm.agent``) -> its estimator."""
 
 
 def estimator(algo: str) -> str:
     """The name of ``algo``'s own uncertainty estimator at the start state ("n/a" if none)."""
-    return ESTIMATORS.get(algo, "n/a")
+    if algo not in algorithms.ALGORITHMS:
+        return "n/a"
+    return ESTIMATORS.get(algorithms.get(algo).agent, "n/a")
 
 
 def _last_over_peak_one(curve: np.ndarray) -> float:

@@ -240,7 +240,7 @@ def main(study: Study, argv: Sequence[str]) -> int:
     backend = backend_of(args, settings.workers)
     out = out_dir(study, settings, args)
     if backend.address is not None:
-        ray_init(backend)  # join (or fail) before the study directory is touched
+        ray_init(backend.address)  # join (or fail) before the study directory is touched
     if args.overwrite and out.exists():
         shutil.rmtree(out)
     t0 = time.perf_counter()

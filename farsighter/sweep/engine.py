@@ -368,7 +368,7 @@ def _on_ray(
     bar: Any,
     done_before: int,
 ) -> None:
-    ray = ray_init(backend)
+    ray = ray_init(backend.address)
 
     @ray.remote(num_cpus=0)
     class ProgressActor:

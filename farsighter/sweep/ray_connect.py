@@ -13,13 +13,9 @@ import tempfile
 import threading
 from collections.abc import Iterator
 from contextlib import contextmanager
-from typing import IO, TYPE_CHECKING, Any
+from typing import IO, Any
 
 from farsighter.errors import FarsighterError
-
-if TYPE_CHECKING:
-    from farsighter.sweep.engine import Backend
-
 
 PROBE_SECONDS = 5.0
 """How long the TCP check of ``--address`` waits for a connection (name lookup included)."""
@@ -120,18 +116,19 @@ def _loopback_node() -> Iterator[None]:
             os.environ[name] = saved
 
 
-def ray_init(backend: Backend) -> Any:
+def ray_init(address: str | None = None) -> Any:
     """Start or join Ray, once per process (one line and exit code 2 when it is not installed,
     the address is malformed or nothing there answers as Ray).
 
     Without an address: a new local Ray (``RAY_ADDRESS`` is not followed) that listens on
     127.0.0.1 only, without the dashboard. With one: it is checked first (:func:`check_address`,
     at most a few seconds), then joined with Ray's connect timeouts shortened
-    (:data:`JOIN_TIMEOUTS`: about 20 s in all when Ray was not imported before)."""
+    (:data:`JOIN_TIMEOUTS`: about 20 s in all when Ray was not imported before). ``address``:
+    a backend's ``address`` (:class:`farsighter.sweep.engine.Backend`)."""
     if "ray" in sys.modules and sys.modules["ray"].is_initialized():
         return sys.modules["ray"]
-    if backend.address:
-        check_address(backend.address)
+    if address:
+        check_address(address)
         for key, value in JOIN_TIMEOUTS.items():
             os.environ.setdefault(key, value)
     try:
@@ -142,15 +139,15 @@ def ray_init(backend: Backend) -> Any:
             "worker processes)"
         ) from None
     os.environ.setdefault("RAY_DEDUP_LOGS", "0")
-    if backend.address:
-        host, port = parse_address(backend.address)
+    if address:
+        host, port = parse_address(address)
         said: list[str] = []
         try:
             with _ray_messages_kept_unless_it_fails(said):
-                ray.init(address=backend.address, log_to_driver=False)
+                ray.init(address=address, log_to_driver=False)
         except (OSError, RuntimeError, ValueError) as exc:
             raise FarsighterError(
-                f"cannot join the Ray cluster at --address {backend.address}: "
+                f"cannot join the Ray cluster at --address {address}: "
                 f"{_hostport(host, port)} accepts TCP connections but joining failed "
                 f"({_first_line(exc)}{_last_message(said)}); {_join_hint(said)}"
             ) from None

@@ -104,7 +104,7 @@ def main(argv: Sequence[str]) -> int:
         print(f"{len(spec.trials)} trials, {len(todo)} to run, in {out}, on {backend.describe()}")
         return 0
     if backend.address is not None:
-        ray_init(backend)  # join (or fail) before the sweep directory is touched
+        ray_init(backend.address)  # join (or fail) before the sweep directory is touched
     if args.overwrite and out.exists():
         shutil.rmtree(out)
     t0 = time.perf_counter()
