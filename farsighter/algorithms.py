@@ -41,8 +41,9 @@ class Algorithm:
     (a graph or a compilation per size) and NAF's update was never measured so: both run
     eagerly."""
     seed_batch: str = ""
-    """Module of ``farsighter.agents`` whose ``SeedBatch`` trains several seeds of it as one
-    computation (:mod:`farsighter.seeds`); '' where its seeds train one at a time."""
+    """Module of ``farsighter.agents`` whose ``SEED_AGENTS`` trains several seeds of it as one
+    computation (:mod:`farsighter.seeds`): the agent's own module where the agent is written over
+    the seed axis; '' where its seeds train one at a time."""
 
 
 TABLE: tuple[Algorithm, ...] = (
@@ -50,7 +51,7 @@ TABLE: tuple[Algorithm, ...] = (
         "ddqn",
         "double DQN with epsilon-greedy exploration (section 3.2)",
         agent="ddqn",
-        seed_batch="ddqn_seeds",
+        seed_batch="ddqn",
         actions="discrete",
         fast_step=True,
     ),
@@ -58,7 +59,7 @@ TABLE: tuple[Algorithm, ...] = (
         "kddqn",
         "double DQN with k-step returns (section 5.2 baselines)",
         agent="ddqn",
-        seed_batch="ddqn_seeds",
+        seed_batch="ddqn",
         actions="discrete",
         fast_step=True,
         defaults={"k": 3},
@@ -102,7 +103,7 @@ TABLE: tuple[Algorithm, ...] = (
         "rnd",
         "double DQN with a random-network-distillation bonus (appendix 9.1.1)",
         agent="rnd",
-        seed_batch="rnd_seeds",
+        seed_batch="rnd",
         actions="discrete",
         fast_step=True,
     ),
@@ -110,7 +111,7 @@ TABLE: tuple[Algorithm, ...] = (
         "krnd",
         "RND with k-step returns, TD(K)+RND (appendix 9.1.1)",
         agent="rnd",
-        seed_batch="rnd_seeds",
+        seed_batch="rnd",
         actions="discrete",
         fast_step=True,
         defaults={"k": 3},

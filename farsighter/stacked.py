@@ -293,6 +293,40 @@ class StackedQNetwork(nn.Module):
                 getattr(self, name)[s].copy_(state[name])
 
 
+class OneSeed(nn.Module):
+    """One network as a seed axis of one: ``forward`` takes (1, B, ...) and gives (1, B, ...),
+    through the network alone (any architecture or precision, compiled or captured), so that an
+    agent written over the seed axis runs a single seed as the network alone runs it. Its
+    ``member_*`` methods are :class:`StackedQNetwork`'s for seed 0."""
+
+    def __init__(self, net: nn.Module) -> None:
+        super().__init__()
+        self.net = net
+
+    def forward(self, obs_SB: torch.Tensor) -> torch.Tensor:
+        return self.net(obs_SB[0]).unsqueeze(0)  # type: ignore[no-any-return]
+
+    def member_forward(self, obs_B: torch.Tensor, s: int) -> torch.Tensor:
+        return self.net(obs_B)  # type: ignore[no-any-return]
+
+    def member_state(self, s: int) -> dict[str, torch.Tensor]:
+        return {name: t.clone() for name, t in self.net.state_dict().items()}
+
+    def load_member(self, s: int, state: dict[str, torch.Tensor]) -> None:
+        self.net.load_state_dict(state)
+
+
+SeedNetwork = OneSeed | StackedQNetwork
+"""A network with a seed axis (:func:`seed_network`)."""
+
+
+def seed_network(nets: Sequence[nn.Module]) -> SeedNetwork:
+    """S networks (each built under its own seed) as one with a seed axis: the network alone
+    for one seed (:class:`OneSeed`), stacked for several (:class:`StackedQNetwork`, which
+    refuses networks it cannot stack)."""
+    return OneSeed(nets[0]) if len(nets) == 1 else StackedQNetwork(nets)
+
+
 def _stacked(tensors: Sequence[torch.Tensor]) -> torch.Tensor:
     """The tensors stacked along a new seed axis, each seed's slice aligned (:data:`ALIGN`)."""
     out = aligned_empty((len(tensors), *tensors[0].shape), tensors[0])

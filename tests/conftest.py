@@ -25,6 +25,13 @@ class GrabAgent:
         self.agent = agent
 
 
+def inner(agent: Any) -> Any:
+    """The object that holds an agent's parts: the agent itself, or for an agent written over
+    the seed axis (one seed alone, a ``Sole``; one seed of a batch, a member) the seed-axis
+    agent (its replay, networks, loss and counters)."""
+    return getattr(agent, "agents", None) or getattr(agent, "batch", None) or agent
+
+
 def tiny(algo: str, run_dir: Path, env: str = "CartPole-v1", **kw: Any) -> Config:
     values: dict[str, Any] = dict(
         total_steps=1_500,

@@ -18,6 +18,7 @@ from farsighter.cli import main
 from farsighter.config import PRESETS, make_config
 from farsighter.envs import check_spaces
 from farsighter.errors import ConfigError, EnvError
+from tests.conftest import inner
 
 DISCRETE = gym.spaces.Discrete(2)
 BOX_ACTIONS = gym.spaces.Box(-2.0, 2.0, (1,), np.float32)
@@ -49,7 +50,7 @@ def test_every_algorithm_builds_its_agent_from_the_table(algo: str) -> None:
     acts = BOX_ACTIONS if spec.actions == "continuous" else DISCRETE
     agent = build_agent(cfg, OBS, acts, frame_stack=1, device=torch.device("cpu"))
     module = importlib.import_module(f"farsighter.agents.{spec.agent}")
-    assert type(agent) is module.AGENT
+    assert type(inner(agent)) is getattr(module, "SEED_AGENTS", module.AGENT)
     assert agent.act(np.zeros((2, 4), np.float32), 0).shape[0] == 2
     assert agent.diagnostics().get("k", 1.0) == cfg.k
 

@@ -23,7 +23,7 @@ from farsighter.agents.cuda_graph import graphs_enabled, set_capturable
 from farsighter.config import validate
 from farsighter.errors import ConfigError
 from farsighter.ops.blr import BLRHead
-from tests.conftest import tiny
+from tests.conftest import inner, tiny
 from tests.test_farsighter_agent import feed as _feed
 
 CUDA = torch.cuda.is_available()
@@ -71,25 +71,27 @@ def test_blr_head_refreshes_its_float32_posterior_in_place() -> None:
 def test_what_the_captured_step_reads_is_updated_in_place(tmp_path: Path, algo: str) -> None:
     agent = _agent(tmp_path, algo, target_update_every=10, blr__posterior_every=10)
     online, target = (
-        (agent.q, agent.loss.q_target) if algo == "ddqn" else (agent.torso, agent.loss.torso_target)
+        (inner(agent).q, inner(agent).loss.q_target)
+        if algo == "ddqn"
+        else (inner(agent).torso, inner(agent).loss.torso_target)
     )
     tensors = list(online.parameters()) + list(target.parameters())
     if algo != "ddqn":
-        tensors += [agent.head.mean_AD, agent.loss.target_mean_AD]
+        tensors += [inner(agent).head.mean_AD, inner(agent).loss.target_mean_AD]
     ptrs = [t.data_ptr() for t in tensors]
     target_before = [p.clone() for p in target.parameters()]
     _feed(agent, 200)
     for step in range(1, 61):  # updates, target copies and (farsighter family) refreshes
         agent.learn(step)
-    assert agent.counters.target_syncs >= 5
+    assert inner(agent).counters.target_syncs >= 5
     assert [t.data_ptr() for t in tensors] == ptrs
     assert not all(
         torch.equal(a, b) for a, b in zip(target.parameters(), target_before, strict=True)
     )
     if algo != "ddqn":
-        assert agent.counters.refreshes >= 5
+        assert inner(agent).counters.refreshes >= 5
         torch.testing.assert_close(
-            agent.loss.target_mean_AD, agent.head.mean_AD
+            inner(agent).loss.target_mean_AD, inner(agent).head.mean_AD
         )  # copied at line 8
 
 
@@ -118,21 +120,21 @@ def test_cuda_graph_setting_is_checked() -> None:
 
 def test_eager_on_cpu_with_the_default_setting(tmp_path: Path) -> None:
     agent = _agent(tmp_path, "farsighter")
-    assert agent.learner.graphs is False and not hasattr(agent.learner.step, "replay")
-    assert all(g["capturable"] is False for g in agent.learner.opt.param_groups)
+    assert inner(agent).learner.graphs is False and not hasattr(inner(agent).learner.step, "replay")
+    assert all(g["capturable"] is False for g in inner(agent).learner.opt.param_groups)
 
 
 def test_set_capturable_follows_a_loaded_state(tmp_path: Path) -> None:
     agent = _agent(tmp_path, "ddqn")
     _feed(agent, 100)
     agent.learn(20)
-    state = agent.learner.opt.state_dict()
+    state = inner(agent).learner.opt.state_dict()
     for g in state["param_groups"]:
         g["capturable"] = True  # as a GPU run with graphs saves it
-    agent.learner.opt.load_state_dict(state)
-    set_capturable(agent.learner.opt, False)
-    assert all(g["capturable"] is False for g in agent.learner.opt.param_groups)
-    steps = [s["step"] for s in agent.learner.opt.state.values()]
+    inner(agent).learner.opt.load_state_dict(state)
+    set_capturable(inner(agent).learner.opt, False)
+    assert all(g["capturable"] is False for g in inner(agent).learner.opt.param_groups)
+    steps = [s["step"] for s in inner(agent).learner.opt.state.values()]
     assert steps and all(s.device.type == "cpu" and s.dtype == torch.float32 for s in steps)
     agent.learn(40)  # the optimizer steps again on the CPU
 
@@ -141,7 +143,7 @@ def test_set_capturable_follows_a_loaded_state(tmp_path: Path) -> None:
 
 
 def _params(agent: Any) -> list[torch.Tensor]:
-    net = agent.q if hasattr(agent, "q") else agent.torso
+    net = inner(agent).q if hasattr(inner(agent), "q") else inner(agent).torso
     return [p.detach().cpu().clone() for p in net.parameters()]
 
 
@@ -179,7 +181,9 @@ def test_graphed_updates_equal_eager_updates(
     for a, b in zip(_params(graphed), _params(eager), strict=True):
         torch.testing.assert_close(a, b, rtol=1e-4, atol=1e-5)
     if algo in ("bdqn", "farsighter"):  # the agents with a BLR head
-        torch.testing.assert_close(graphed.head.mean_AD, eager.head.mean_AD, rtol=1e-4, atol=1e-5)
+        torch.testing.assert_close(
+            graphed.head.mean_AD, inner(eager).head.mean_AD, rtol=1e-4, atol=1e-5
+        )
 
 
 @pytest.mark.skipif(not CUDA, reason="needs a CUDA device (run on the GPU benchmark machine)")

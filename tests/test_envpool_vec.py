@@ -30,6 +30,7 @@ from farsighter.envs.envpool_vec import (  # noqa: E402
 from farsighter.errors import EnvError  # noqa: E402
 from farsighter.replay import ReplayBuffer  # noqa: E402
 from farsighter.session import final_observations, finished_episodes  # noqa: E402
+from tests.conftest import inner
 
 
 def envpool_of(cfg: Config, *, seed: int = 0, training: bool = True, **kw: Any) -> Any:
@@ -352,7 +353,7 @@ def test_overlap_updates_while_the_games_step(
             pass
 
         def on_finish(self, run_dir: Path, agent: Any) -> None:
-            replays[run_dir.name] = agent.replay
+            replays[run_dir.name] = inner(agent).replay
 
     def run(overlap: str, learning_starts: int) -> dict[str, Any]:
         events.clear()

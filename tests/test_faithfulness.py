@@ -17,7 +17,7 @@ from farsighter.agents.farsighter import FarsighterAgent
 from farsighter.agents.naf import NAFAgent
 from farsighter.config import make_config
 from farsighter.replay import ReplayBuffer, VectorStep
-from tests.conftest import tiny
+from tests.conftest import inner, tiny
 
 CPU = torch.device("cpu")
 
@@ -106,14 +106,16 @@ def test_farsighter_targets_use_the_target_torso_and_target_mean(tmp_path: Path)
 def test_ddqn_targets_evaluate_with_the_target_network(tmp_path: Path) -> None:
     """Double Q: the online network picks a*, the target network values it (fails on a swap or
     on an online evaluation)."""
-    agent: DDQNAgent = cartpole_agent(tmp_path, "ddqn")
-    feed(agent, 300)
+    sole = cartpole_agent(tmp_path, "ddqn")
+    feed(sole, 300)
+    agent: DDQNAgent = sole.agents  # one seed of the agent written over seeds
     perturb(agent.q)
     t = minibatch(agent)
+    q, q_target = agent.q.net, agent.loss.q_target.net  # the seed's networks alone
     with torch.no_grad():
-        a_star = agent.q(t.next_obs_B).argmax(1)
-        q_tgt = agent.loss.q_target(t.next_obs_B).gather(1, a_star[:, None])[:, 0]
-        wrong = agent.q(t.next_obs_B).max(1).values
+        a_star = q(t.next_obs_B).argmax(1)
+        q_tgt = q_target(t.next_obs_B).gather(1, a_star[:, None])[:, 0]
+        wrong = q(t.next_obs_B).max(1).values
     expected = t.returns_B + t.bootstrap_B * q_tgt
     y = agent.loss.targets(t)
     assert torch.allclose(y, expected, atol=1e-5)
@@ -194,7 +196,7 @@ def test_stride_and_recent_window_reach_the_sampler(tmp_path: Path, algo: str) -
     agent = cartpole_agent(
         tmp_path, algo, k=4, stride=True, sample_recent=True, recent_window=300, train_every=1
     )
-    spy = SpyReplay(agent.replay)
+    spy = SpyReplay(inner(agent).replay)
     feed(agent, 400)
     agent.learn(10)
     assert spy.calls, "no minibatch was sampled"

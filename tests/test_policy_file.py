@@ -17,6 +17,7 @@ import farsighter
 from farsighter.config import make_config
 from farsighter.rundir import CHECKPOINT_FILE
 from farsighter.session import POLICY_FILE
+from tests.conftest import inner
 
 SHORT = {
     "total_steps": 300,
@@ -57,7 +58,7 @@ def test_a_ddqn_policy_file_holds_the_online_network_alone(runs: Any) -> None:
     assert size < 200_000, size
     saved = torch.load(run / POLICY_FILE, weights_only=True)  # tensors and plain values only
     assert set(saved["agent"]) == {"q"}
-    assert _bytes(saved["agent"]["q"]) == _bytes(agent.q.state_dict())
+    assert _bytes(saved["agent"]["q"]) == _bytes(inner(agent).q.member_state(0))
     checkpoint = torch.load(run / CHECKPOINT_FILE, weights_only=False)["agent"]
     assert {"q", "q_target", "opt", "rng", "counters"} <= set(checkpoint)  # resumes as before
 

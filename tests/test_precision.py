@@ -13,6 +13,7 @@ from farsighter.agents import build_agent
 from farsighter.config import validate
 from farsighter.errors import ConfigError
 from farsighter.networks import MinAtarCNN, MLPTorso, NatureCNN, Torso, set_precision
+from tests.conftest import inner
 
 
 def _frames(shape: tuple[int, ...], seed: int = 0) -> torch.Tensor:
@@ -63,7 +64,10 @@ def test_build_agent_sets_the_precision_of_every_torso(algo: str) -> None:
     cfg = make_config(algo, "CartPole-v1", precision="bf16", buffer_size=1_000)
     obs_space = gym.spaces.Box(-1, 1, (4,), np.float32)
     agent = build_agent(cfg, obs_space, gym.spaces.Discrete(2), frame_stack=1, device="cpu")
-    held = [*vars(agent).values(), *vars(agent.loss).values()]  # the loss owns the targets
+    held = [
+        *vars(inner(agent)).values(),
+        *vars(inner(agent).loss).values(),
+    ]  # the loss owns the targets
     torsos = [
         m for v in held if isinstance(v, nn.Module) for m in v.modules() if isinstance(m, Torso)
     ]

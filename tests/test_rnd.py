@@ -24,7 +24,7 @@ def _agent(tmp_path: Path, algo: str = "rnd", obs_dim: int = 4, **kw: Any) -> RN
     cfg = tiny(algo, tmp_path / "unused", **kw)
     obs_space = gym.spaces.Box(-np.inf, np.inf, (obs_dim,), np.float32)
     return RNDAgent(
-        cfg, obs_space, gym.spaces.Discrete(3), frame_stack=1, device=torch.device("cpu")
+        [cfg], obs_space, gym.spaces.Discrete(3), frame_stack=1, device=torch.device("cpu")
     )
 
 
@@ -46,7 +46,7 @@ def test_intrinsic_reward_is_divided_by_the_running_std(tmp_path: Path) -> None:
     for n in (8, 32, 3):
         e = rng.gamma(2.0, 0.5, size=n)
         seen.append(e)
-        out = agent.bonus.normalize(e)
+        out = agent.bonuses[0].normalize(e)
         std = np.concatenate(seen).std()  # the std of every intrinsic reward so far
         assert np.allclose(out, e / std, rtol=1e-3)  # divided, not centred (as in RND)
 
@@ -56,12 +56,12 @@ def test_predictor_error_falls_on_trained_states_and_stays_high_elsewhere(tmp_pa
     rng = np.random.default_rng(0)
     trained = torch.as_tensor(rng.normal(0.0, 0.5, size=(128, 4)), dtype=torch.float32)
     unseen = torch.as_tensor(rng.normal(0.0, 0.5, size=(128, 4)) + 4.0, dtype=torch.float32)
-    before_trained = agent.bonus.prediction_error(trained).mean().item()
-    before_unseen = agent.bonus.prediction_error(unseen).mean().item()
+    before_trained = agent.bonuses[0].prediction_error(trained).mean().item()
+    before_unseen = agent.bonuses[0].prediction_error(unseen).mean().item()
     for _ in range(300):
-        agent.bonus.train(trained)
-    after_trained = agent.bonus.prediction_error(trained).mean().item()
-    after_unseen = agent.bonus.prediction_error(unseen).mean().item()
+        agent.bonuses[0].train(trained)
+    after_trained = agent.bonuses[0].prediction_error(trained).mean().item()
+    after_unseen = agent.bonuses[0].prediction_error(unseen).mean().item()
     assert after_trained < 0.1 * before_trained
     assert after_unseen > 0.5 * before_unseen
     assert after_unseen > 10 * after_trained
@@ -72,9 +72,9 @@ def test_observations_are_whitened_with_running_statistics(tmp_path: Path) -> No
     rng = np.random.default_rng(2)
     obs = rng.normal(5.0, 3.0, size=(400, 4)).astype(np.float32)
     for o in obs:
-        agent.observe(VectorStep(o[None], np.array([0]), np.array([0.0]), [False], [False], None))
-    assert np.allclose(agent.bonus.obs_rms.mean, obs.mean(axis=0), atol=1e-3)
-    x = agent.bonus._input(torch.as_tensor(obs)).numpy()
+        agent.observe([VectorStep(o[None], np.array([0]), np.array([0.0]), [False], [False], None)])
+    assert np.allclose(agent.bonuses[0].obs_rms.mean, obs.mean(axis=0), atol=1e-3)
+    x = agent.bonuses[0]._input(torch.as_tensor(obs)).numpy()
     assert abs(x.mean()) < 0.05 and abs(x.std() - 1.0) < 0.05 and np.abs(x).max() <= 5.0
 
 
@@ -82,34 +82,36 @@ def test_kstep_intrinsic_return_sums_the_window_next_states(tmp_path: Path) -> N
     agent = _agent(tmp_path, algo="krnd", obs_dim=1, gamma=0.5)
     assert agent.cfg.k == 3
     fill(agent.replay, [(3, "term"), (5, "trunc")])  # obs = step id; final obs = id + 0.5
-    agent.bonus.normalize = lambda e: e  # type: ignore[method-assign]
+    agent.bonuses[0].normalize = lambda e: e  # type: ignore[method-assign]
     batch = agent.replay.sample_indices(np.zeros(3, np.int64), np.array([0, 1, 4]), 3, 0.5)
 
     def e(x: float) -> float:
-        return agent.bonus.prediction_error(torch.tensor([[x]])).item()
+        return agent.bonuses[0].prediction_error(torch.tensor([[x]])).item()
 
     expected = [
         e(1) + 0.5 * e(2) + 0.25 * e(2.5),  # rows 1, 2 and the final row of episode 1
         e(2) + 0.5 * e(2.5),  # the window stops at the terminal
         e(4) + 0.5 * e(5) + 0.25 * e(6),  # episode 2 starts at row 4 (obs 3)
     ]
-    assert np.allclose(agent.bonus.returns(batch, agent.replay), expected, rtol=1e-5)
+    assert np.allclose(agent.bonuses[0].returns(batch, agent.replay), expected, rtol=1e-5)
 
 
 def test_update_trains_q_and_predictor(tmp_path: Path) -> None:
     agent = _agent(tmp_path, algo="krnd", obs_dim=1)
     fill(agent.replay, [(30, "term"), (40, "trunc")])
-    pred = [p.detach().clone() for p in agent.bonus.predictor.parameters()]
-    target = [p.detach().clone() for p in agent.bonus.rnd_target.parameters()]
-    loss = agent.update()
-    assert torch.isfinite(loss)
+    pred = [p.detach().clone() for p in agent.bonuses[0].predictor.parameters()]
+    target = [p.detach().clone() for p in agent.bonuses[0].rnd_target.parameters()]
+    loss_S = agent.update()
+    assert loss_S.shape == (1,) and torch.isfinite(loss_S).all()
     assert any(
-        not torch.equal(a, b) for a, b in zip(pred, agent.bonus.predictor.parameters(), strict=True)
+        not torch.equal(a, b)
+        for a, b in zip(pred, agent.bonuses[0].predictor.parameters(), strict=True)
     )
     assert all(
-        torch.equal(a, b) for a, b in zip(target, agent.bonus.rnd_target.parameters(), strict=True)
+        torch.equal(a, b)
+        for a, b in zip(target, agent.bonuses[0].rnd_target.parameters(), strict=True)
     )
-    d = agent.diagnostics()
+    d = agent.member(0).diagnostics()
     assert d["k"] == 3 and d["intrinsic_reward"] > 0 and np.isfinite(d["predictor_loss"])
 
 
@@ -142,6 +144,6 @@ def test_atari_smoke_with_frame_stacks(tmp_path: Path) -> None:
     grab = GrabAgent()
     summary = farsighter.train(cfg, callbacks=[grab])
     assert summary["global_step"] == 300
-    agent = grab.agent
-    assert agent.replay.frame_stack == 4 and not agent.bonus.whiten
-    assert np.isfinite(agent.diagnostics()["intrinsic_reward"])
+    agent = grab.agent.batch  # the seed's agent (an RNDAgent of one seed)
+    assert agent.replay.frame_stack == 4 and not agent.bonuses[0].whiten
+    assert np.isfinite(grab.agent.diagnostics()["intrinsic_reward"])

@@ -10,6 +10,7 @@ import pytest
 import torch
 
 import farsighter
+from farsighter.agents import Alone, build_seed_agents
 from farsighter.agents.ddqn import DDQNAgent
 from farsighter.errors import RunDirError
 from farsighter.replay import VectorStep
@@ -69,11 +70,10 @@ def test_crash_then_resume_equals_uninterrupted(
     farsighter.train(tiny(algo, full))
 
     crashed = tmp_path / "crashed"
-    agent_cls = type(
-        farsighter.train.__globals__["build_agent"](  # the class the loop will use
-            tiny(algo, crashed), *_spaces(), frame_stack=1, device=torch.device("cpu")
-        )
+    agents = build_seed_agents(  # the class the loop will use
+        [tiny(algo, crashed)], *_spaces(), frame_stack=1, device=torch.device("cpu")
     )
+    agent_cls = type(agents.agent) if isinstance(agents, Alone) else type(agents)
     original = agent_cls.learn
 
     def learn_then_crash(self, global_step: int):  # type: ignore[no-untyped-def]
@@ -116,18 +116,20 @@ def test_resume_rejects_changed_config_and_corrupt_checkpoint(tmp_path: Path) ->
 def test_target_network_does_not_move_with_online_updates(tmp_path: Path) -> None:
     cfg = tiny("ddqn", tmp_path / "unused", target_update_every=10_000)
     obs_space, act_space = _spaces()
-    agent = DDQNAgent(cfg, obs_space, act_space, frame_stack=1, device=torch.device("cpu"))
+    agent = DDQNAgent([cfg], obs_space, act_space, frame_stack=1, device=torch.device("cpu"))
     rng = np.random.default_rng(0)
     for t in range(300):
         agent.observe(
-            VectorStep(
-                rng.normal(size=(1, 4)).astype(np.float32),
-                np.array([t % 2]),
-                np.array([1.0]),
-                np.array([t % 50 == 49]),
-                np.array([False]),
-                [rng.normal(size=4).astype(np.float32)] if t % 50 == 49 else None,
-            )
+            [
+                VectorStep(
+                    rng.normal(size=(1, 4)).astype(np.float32),
+                    np.array([t % 2]),
+                    np.array([1.0]),
+                    np.array([t % 50 == 49]),
+                    np.array([False]),
+                    [rng.normal(size=4).astype(np.float32)] if t % 50 == 49 else None,
+                )
+            ]
         )
     before = {k: v.clone() for k, v in agent.loss.q_target.state_dict().items()}
     online_before = {k: v.clone() for k, v in agent.q.state_dict().items()}
@@ -177,11 +179,10 @@ def test_resume_without_replay_refills_before_updating(
     run = tmp_path / "run"
     farsighter.train(tiny(algo, run, total_steps=1_000, save_replay=False, **extra))
     saved = load_checkpoint(run)["agent"]
-    agent_cls = type(
-        farsighter.train.__globals__["build_agent"](
-            tiny(algo, run), *_spaces(), frame_stack=1, device=torch.device("cpu")
-        )
+    agents = build_seed_agents(  # the class the loop will use
+        [tiny(algo, run)], *_spaces(), frame_stack=1, device=torch.device("cpu")
     )
+    agent_cls = type(agents.agent) if isinstance(agents, Alone) else type(agents)
     calls: list[int] = []
     original = agent_cls.update
 

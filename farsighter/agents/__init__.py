@@ -13,7 +13,15 @@ import gymnasium as gym
 import torch
 
 from farsighter import algorithms
-from farsighter.agents.protocol import Agent, AgentFactory, Alone, LearningAgent, SeedAgents
+from farsighter.agents.protocol import (
+    Agent,
+    AgentFactory,
+    Alone,
+    LearningAgent,
+    SeedAgents,
+    SeedAgentsFactory,
+    Sole,
+)
 from farsighter.config import Config
 from farsighter.networks import set_precision
 
@@ -42,7 +50,7 @@ def build_agent(
         raise TypeError(f"{cfg.algo} needs a Box observation space, got {obs_space}")
     factory: AgentFactory = importlib.import_module(f"farsighter.agents.{spec.agent}").AGENT
     agent = factory(cfg, obs_space, act_space, frame_stack=frame_stack, device=device)
-    for net in networks(agent):
+    for net in networks(agent.agents if isinstance(agent, Sole) else agent):
         set_precision(net, cfg.runtime.precision)
     return agent
 
@@ -56,17 +64,26 @@ def build_seed_agents(
     device: torch.device,
 ) -> SeedAgents:
     """The seeds of ``cfgs`` (one config but for seed and run directory) as the loop drives
-    them: one agent alone (:class:`Alone`) for one config, else the algorithm's seed-batched
+    them: the agent written over the seed axis where its module has one (``SEED_AGENTS``), one
+    agent alone (:class:`Alone`) for one config otherwise, else the algorithm's seed-batched
     form (``Algorithm.seed_batch``; :func:`farsighter.seeds.train_seeds` checks it applies)."""
-    if len(cfgs) == 1:
+    spec = algorithms.get(cfgs[0].algo)
+    if not isinstance(obs_space, gym.spaces.Box):  # farsighter.envs.check_spaces says why
+        raise TypeError(f"{spec.name} needs a Box observation space, got {obs_space}")
+    module = importlib.import_module(f"farsighter.agents.{spec.agent}")
+    if len(cfgs) == 1 and not hasattr(module, "SEED_AGENTS"):
         return Alone(
             build_agent(cfgs[0], obs_space, act_space, frame_stack=frame_stack, device=device)
         )
-    module = algorithms.get(cfgs[0].algo).seed_batch
-    if not module:
-        raise ValueError(f"{cfgs[0].algo} has no seed-batched form")
-    batch = importlib.import_module(f"farsighter.agents.{module}").SeedBatch
-    return batch(cfgs, obs_space, act_space, device=device)  # type: ignore[no-any-return]
+    if not hasattr(module, "SEED_AGENTS"):
+        if not spec.seed_batch:
+            raise ValueError(f"{spec.name} has no seed-batched form")
+        module = importlib.import_module(f"farsighter.agents.{spec.seed_batch}")
+    factory: SeedAgentsFactory = module.SEED_AGENTS
+    agents = factory(cfgs, obs_space, act_space, frame_stack=frame_stack, device=device)
+    for net in networks(agents):
+        set_precision(net, cfgs[0].runtime.precision)
+    return agents
 
 
 def networks(agent: object) -> list[torch.nn.Module]:

@@ -19,6 +19,7 @@ from farsighter.config import AdaptiveKConfig, Config
 from farsighter.ops.adaptive_k import after_refresh
 from farsighter.replay import Batch, ReplayBuffer
 from farsighter.replay.buffer import host_to_device
+from farsighter.stacked import clip_per_seed
 
 
 def make_optimizer(params: Iterable[nn.Parameter], cfg: Config) -> torch.optim.Optimizer:
@@ -45,18 +46,20 @@ def make_replay(
     seed: int,
     act_space: gym.Space | None = None,
     device: torch.device | None = None,
+    kind: type[ReplayBuffer] = ReplayBuffer,
 ) -> ReplayBuffer:
     """A replay buffer sized for the run; uint8 images keep one byte per pixel. Discrete actions
     are stored as int32; Box actions (``act_space``) as float32 vectors of their shape. On a CUDA
     ``device`` with ``cfg.runtime.gpu_replay`` auto, observations are mirrored there (minibatches are
-    gathered on the GPU: :func:`sample_minibatch`)."""
+    gathered on the GPU: :func:`sample_minibatch`). ``kind``: the buffer's class (a subclass of
+    :class:`ReplayBuffer`, such as one seed's replay of an agent written over seeds)."""
     shape = obs_space.shape
     assert shape is not None
     action_shape: tuple[int, ...] = ()
     action_dtype: Any = np.int32
     if isinstance(act_space, gym.spaces.Box):
         action_shape, action_dtype = tuple(act_space.shape), np.float32
-    return ReplayBuffer(
+    return kind(
         cfg.buffer_size,
         tuple(shape),
         obs_space.dtype,
@@ -180,11 +183,19 @@ def elementwise_td_loss(pred: torch.Tensor, target: torch.Tensor, kind: str) -> 
 
 
 def clip_and_step(
-    loss: torch.Tensor, params: list[nn.Parameter], opt: torch.optim.Optimizer, max_norm: float
+    loss: torch.Tensor,
+    params: list[nn.Parameter],
+    opt: torch.optim.Optimizer,
+    max_norm: float,
+    seeds: int = 1,
 ) -> None:
+    """Backward, the gradients clipped (each seed's by its own norm where ``params`` carry a
+    seed axis of ``seeds`` > 1), and the optimizer step."""
     opt.zero_grad(set_to_none=True)
     loss.backward()
-    if max_norm > 0:
+    if max_norm > 0 and seeds > 1:
+        clip_per_seed(params, seeds, max_norm)
+    elif max_norm > 0:
         clip_gradients(params, max_norm)
     opt.step()
 

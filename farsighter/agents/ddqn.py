@@ -1,10 +1,22 @@
 """DDQN (paper section 3.2) and k-DDQN (section 5.2 baselines): epsilon-greedy exploration,
-double-Q targets with one-step (k = 1) or k-step returns formed by the replay at sample time."""
+double-Q targets with one-step (k = 1) or k-step returns formed by the replay at sample time.
+
+Written once over a seed axis: S seeds of one config (S = 1 for a run alone) act, record and
+learn as one computation. Each seed keeps what makes it that seed: its initial weights (built
+under its seed), its replay streams and their generator (seed + 1), its epsilon-greedy generator
+(seed + 2), its own loss, gradient clipping and optimizer state; on CPU each seed of a batch
+trains bit for bit as it trains alone (``tests/test_seeds.py``). Its networks are
+:func:`farsighter.stacked.seed_network`'s: one network alone for S = 1 (any architecture,
+precision, compiled or captured), stacked MLPs for S > 1. :meth:`DDQNAgent.member` is one seed
+seen as an agent, whose checkpoint is the one its run alone writes.
+"""
 
 from __future__ import annotations
 
 import copy
-from typing import Any
+import dataclasses
+from collections.abc import Sequence
+from typing import Any, cast
 
 import gymnasium as gym
 import numpy as np
@@ -15,118 +27,204 @@ from farsighter.agents.common import (
     TensorBatch,
     batch_tensors,
     build_seeded,
-    greedy_actions,
-    load_state,
-    make_replay,
+    elementwise_td_loss,
+    minibatch_args,
     obs_tensor,
-    sample_minibatch,
-    save_state,
     sync_target,
-    td_loss,
     updates_owed,
 )
 from farsighter.agents.cuda_graph import Tensors
 from farsighter.agents.learner import Learner
-from farsighter.agents.protocol import AgentFactory
+from farsighter.agents.protocol import AgentFactory, SeedAgentsFactory, Sole
+from farsighter.agents.seed_members import Member, seed_replay, stack_refusal
 from farsighter.config import Config
-from farsighter.exploration import EpsilonGreedy
+from farsighter.exploration.epsilon import epsilon_draws, epsilon_greedy, linear_schedule
 from farsighter.networks import QNetwork, online_and_target
 from farsighter.ops.targets import double_q_target
-from farsighter.replay import VectorStep
+from farsighter.replay import Batch, VectorStep
+from farsighter.stacked import OneSeed, SeedNetwork, seed_network
+
+
+def supports(cfg: Config, obs_space: gym.Space | None, device: torch.device) -> str:
+    """Why seeds of ``cfg`` cannot train as one batch here ('' when they can)."""
+    return stack_refusal(cfg, obs_space)
 
 
 class DoubleQLoss:
-    """Eq. 3 on the double-Q target of Eq. 2 with k-step returns. The loss owns the target
-    network, a copy of ``q`` made here and moved only by the hard copy (:func:`sync_target`)."""
+    """Eq. 3 on the double-Q target of Eq. 2 with k-step returns, each seed's mean over its own
+    B rows (the minibatch holds seed 0's rows, then seed 1's, ...). The loss is the sum of the
+    seeds' means: each seed's gradient is its own loss's. Owns the target network, built like
+    ``q`` and moved only by the hard copy (:func:`sync_target`)."""
 
-    def __init__(self, q: QNetwork, kind: str) -> None:
-        self.q = q
-        self.q_target = copy.deepcopy(q).requires_grad_(False)
-        self.kind = kind
+    def __init__(self, q: SeedNetwork, q_target: SeedNetwork, kind: str, seeds: int) -> None:
+        self.q, self.q_target = q, q_target.requires_grad_(False)
+        self.kind, self.seeds = kind, seeds
+
+    def by_seed(self, x: torch.Tensor) -> torch.Tensor:
+        return x.view(self.seeds, -1, *x.shape[1:])
 
     @torch.no_grad()
     def targets(self, t: TensorBatch) -> torch.Tensor:
-        """y = R + gamma^n Q_target(s_{t+n}, argmax_a Q(s_{t+n}, a)), no bootstrap at a terminal."""
-        q_next_online, q_next_target = online_and_target(self.q, self.q_target, t.next_obs_B)
-        return double_q_target(t.returns_B, t.bootstrap_B, q_next_online, q_next_target)
+        """y = R + gamma^n Q_target(s_{t+n}, argmax_a Q(s_{t+n}, a)), no bootstrap at a terminal;
+        (S * B,)."""
+        if isinstance(self.q, OneSeed) and isinstance(self.q_target, OneSeed):
+            online, target = cast(QNetwork, self.q.net), cast(QNetwork, self.q_target.net)
+            q_next, q_next_target = online_and_target(online, target, t.next_obs_B)
+        else:
+            next_SB = self.by_seed(t.next_obs_B)
+            q_next = self.q(next_SB).flatten(0, 1)
+            q_next_target = self.q_target(next_SB).flatten(0, 1)
+        return double_q_target(t.returns_B, t.bootstrap_B, q_next, q_next_target)
 
     def __call__(self, inputs: Tensors) -> Tensors:
         t = TensorBatch.of(inputs)
-        q_B = self.q(t.obs_B).gather(1, t.actions_B.unsqueeze(1)).squeeze(1)
-        return {"loss": td_loss(q_B, self.targets(t), self.kind)}
+        q_SBA = self.q(self.by_seed(t.obs_B))
+        q_SB = q_SBA.gather(2, self.by_seed(t.actions_B).unsqueeze(2)).squeeze(2)
+        loss_S = elementwise_td_loss(q_SB, self.by_seed(self.targets(t)), self.kind).mean(1)
+        return {"loss": loss_S.sum(), "loss_S": loss_S.detach()}
 
 
 class DDQNAgent:
-    """Q(s, a) = W phi_theta(s); target network copied every N steps (Eq. 2-3)."""
+    """Q(s, a) = W phi_theta(s) for S seeds; target network copied every N steps (Eq. 2-3)."""
 
     def __init__(
         self,
-        cfg: Config,
+        cfgs: Sequence[Config],
         obs_space: gym.spaces.Box,
         act_space: gym.spaces.Discrete,
         *,
         frame_stack: int,
         device: torch.device,
     ) -> None:
-        self.cfg = cfg
-        self.device = device
-        self.num_actions = int(act_space.n)
-        self.q = build_seeded(
-            cfg.seed, lambda: QNetwork(obs_space, self.num_actions, cfg.hidden_sizes)
-        ).to(device)
-        self.loss = DoubleQLoss(self.q, cfg.loss)
-        self.learner = Learner(self.loss, self.q.parameters(), cfg, device)
-        self.replay = make_replay(cfg, obs_space, frame_stack, seed=cfg.seed + 1, device=device)
-        self.rng = np.random.default_rng(cfg.seed + 2)
-        self.explore = EpsilonGreedy(cfg, self.num_actions, self.rng)
-        self.counters = Counters(k=cfg.k)
+        cfg = self.cfg = cfgs[0]
+        self.cfgs, self.device, self.num_actions = list(cfgs), device, int(act_space.n)
+        nets = [
+            build_seeded(c.seed, lambda: QNetwork(obs_space, self.num_actions, cfg.hidden_sizes))
+            for c in cfgs
+        ]
+        self.q = seed_network(nets).to(device)
+        # the target: copies (a seed alone's network is the online one's own module)
+        q_target = seed_network([copy.deepcopy(net) for net in nets]).to(device)
+        self.loss = DoubleQLoss(self.q, q_target, cfg.loss, self.seeds)
+        self.learner = Learner(self.loss, self.q.parameters(), cfg, device, seeds=self.seeds)
+        self.replay = seed_replay(cfgs, obs_space, device, frame_stack)
+        self.rngs = [np.random.default_rng(c.seed + 2) for c in cfgs]
+        self.counters = Counters(k=cfg.k)  # one schedule: the seeds step together
+        self.epsilon = cfg.eps_start
+
+    @property
+    def seeds(self) -> int:
+        return len(self.cfgs)
 
     # ------------------------------------------------------------------ acting
-    def act(self, obs_E: np.ndarray, global_step: int, explore: bool = True) -> np.ndarray:
-        """Epsilon-greedy actions for a batch of environments (greedy when not exploring)."""
-        if not explore:
-            return self.greedy(obs_E)
-        return self.explore(global_step, lambda: self.greedy(obs_E), obs_E.shape[0])
+    def greedy(self, obs_S: Sequence[np.ndarray]) -> np.ndarray:
+        """argmax_a Q(s, a) of every seed's network on its own observations, (S, E)."""
+        with torch.inference_mode():
+            obs = obs_tensor(np.stack(obs_S), self.device)
+            return self.q(obs).argmax(dim=2).cpu().numpy()
 
-    def greedy(self, obs_E: np.ndarray) -> np.ndarray:
-        return greedy_actions(self.q, obs_E, self.device)
+    def act(self, obs_S: Sequence[np.ndarray], global_step: int) -> np.ndarray:
+        """Each seed's epsilon-greedy actions from its own generator (the coins, then the
+        random actions), (S, E); the greedy forward only when some environment needs it."""
+        cfg = self.cfg
+        self.epsilon = linear_schedule(cfg.eps_start, cfg.eps_end, cfg.eps_decay_steps, global_step)
+        draws = [epsilon_draws(rng, self.num_actions, len(obs_S[0])) for rng in self.rngs]
+        random_SE = np.stack([coins for coins, _ in draws]) < self.epsilon
+        random_actions_SE = np.stack([actions for _, actions in draws])
+        if random_SE.all():
+            return random_actions_SE
+        return np.where(random_SE, random_actions_SE, self.greedy(obs_S))
+
+    def observe(self, steps: Sequence[VectorStep]) -> None:
+        """One vector step of every seed, in seed order, into the seeds' streams."""
+        self.replay.add_steps(steps)
+
+    # ------------------------------------------------------------------ learning
+    def learn(self, global_step: int) -> list[dict[str, torch.Tensor]]:
+        """The updates owed at ``global_step``; each seed's latest TD loss when it updated."""
+        loss_S = None
+        for _ in range(updates_owed(self.counters, self.cfg, global_step)):
+            loss_S = self.update()
+        every = self.cfg.target_update_every
+        sync_target(self.counters, global_step, every, (self.q, self.loss.q_target))
+        if loss_S is None:
+            return [{} for _ in range(self.seeds)]
+        return [{"td_loss": loss_S[s]} for s in range(self.seeds)]
+
+    def update(self) -> torch.Tensor:
+        """One gradient step of every seed on its own double-Q minibatch; the seeds' losses."""
+        cfg = self.cfg
+        batch = self.replay.sample_seeds(cfg.batch_size, **minibatch_args(cfg, self.counters.k))
+        t = self.returns(batch, batch_tensors(batch, self.device))
+        loss_S = self.learner(t.tensors())["loss_S"]
+        self.after_update(t)
+        return loss_S
+
+    def returns(self, batch: Batch, t: TensorBatch) -> TensorBatch:
+        """The minibatch the loss learns from (RND adds its bonus to the returns here)."""
+        return t
+
+    def after_update(self, t: TensorBatch) -> None:
+        """After every seed's step (RND trains its predictors here)."""
+
+    # ------------------------------------------------------------------ one seed
+    def member(self, s: int) -> DDQNMember:
+        return DDQNMember(self, s)
+
+
+class DDQNMember(Member):
+    """One seed of a :class:`DDQNAgent`, as an agent."""
+
+    batch: DDQNAgent
+
+    def q_mean(self, obs_B: np.ndarray) -> torch.Tensor:
+        """Q(s, .) of this seed's network, (B, A)."""
+        b = self.batch
+        return b.q.member_forward(obs_tensor(np.asarray(obs_B), b.device), self.s)
+
+    def explore(self, obs_E: np.ndarray, global_step: int) -> np.ndarray:
+        """Epsilon-greedy from this seed's generator."""
+        cfg, b = self.cfg, self.batch
+        eps = linear_schedule(cfg.eps_start, cfg.eps_end, cfg.eps_decay_steps, global_step)
+        greedy = lambda: self.greedy(obs_E)  # noqa: E731
+        return epsilon_greedy(b.rngs[self.s], eps, b.num_actions, greedy, len(obs_E))
 
     @torch.no_grad()
     def q_estimate(self, obs_B: np.ndarray) -> tuple[np.ndarray, np.ndarray | None]:
         """Q(s, .) for a batch of states; DDQN has no posterior, so no variance."""
-        return self.q(obs_tensor(obs_B, self.device)).cpu().numpy(), None
-
-    def observe(self, step: VectorStep) -> None:
-        self.replay.add_step(step)
-
-    # ------------------------------------------------------------------ learning
-    def learn(self, global_step: int) -> dict[str, torch.Tensor]:
-        metrics: dict[str, torch.Tensor] = {}
-        for _ in range(updates_owed(self.counters, self.cfg, global_step)):
-            metrics["td_loss"] = self.update()
-        sync_target(
-            self.counters, global_step, self.cfg.target_update_every, (self.q, self.loss.q_target)
-        )
-        return metrics
-
-    def update(self) -> torch.Tensor:
-        """One gradient step on the double-Q loss of a k-step minibatch; returns the loss."""
-        cfg = self.cfg
-        batch = sample_minibatch(self.replay, cfg, cfg.batch_size, self.counters.k)
-        return self.learner(batch_tensors(batch, self.device).tensors())["loss"]
+        return self.q_mean(obs_B).cpu().numpy(), None
 
     def diagnostics(self) -> dict[str, float]:
-        return {"epsilon": self.explore.epsilon, "k": float(self.counters.k)}
-
-    # ------------------------------------------------------------------ checkpoints
-    SAVED = ("q", "q_target", "opt", "rng", "counters")
-    SAVED_AT = {"q_target": "loss.q_target", "opt": "learner"}  # keys of the earlier layout
+        return {"epsilon": self.batch.epsilon, "k": float(self.batch.counters.k)}
 
     def state_dict(self, include_replay: bool = True) -> dict[str, Any]:
-        return save_state(self, self.SAVED, include_replay)
+        """This seed's checkpoint, the one its run alone writes."""
+        b, s = self.batch, self.s
+        return {
+            "q": b.q.member_state(s),
+            "q_target": b.loss.q_target.member_state(s),
+            "opt": b.learner.member_state(s),
+            "rng": b.rngs[s].bit_generator.state,
+            "counters": dataclasses.asdict(b.counters),
+            "replay": b.replay.member_state(s) if include_replay else None,
+        }
 
     def load_state_dict(self, state: dict[str, Any]) -> None:
-        load_state(self, self.SAVED, state)
+        """A checkpoint of this seed (written alone or in a batch). Seeds resume together only
+        from checkpoints with the same counters (:func:`farsighter.seeds.train_seeds` groups
+        them so)."""
+        b, s = self.batch, self.s
+        b.q.load_member(s, state["q"])
+        b.loss.q_target.load_member(s, state["q_target"])
+        b.learner.load_member(s, state["opt"])
+        b.rngs[s].bit_generator.state = state["rng"]
+        for key, value in state["counters"].items():  # equal for every seed of a batch
+            setattr(b.counters, key, value)
+        if state.get("replay") is not None:
+            b.replay.load_member(s, state["replay"])
+        else:
+            b.counters.hold_pending = True
 
 
-AGENT: AgentFactory = DDQNAgent  # the class farsighter.algorithms names; mypy checks the protocol
+SEED_AGENTS: SeedAgentsFactory = DDQNAgent  # the class farsighter.algorithms names
+AGENT: AgentFactory = Sole.of(DDQNAgent)  # one seed alone, as a LearningAgent

@@ -75,6 +75,7 @@ class SeedBatchFarsighter:
         obs_space: gym.spaces.Box,
         act_space: gym.spaces.Discrete,
         *,
+        frame_stack: int = 1,
         device: torch.device,
     ) -> None:
         cfg = self.cfg = cfgs[0]
@@ -290,5 +291,5 @@ class SeedBatchFarsighter:
         return FarsighterSeedMember(self, s)
 
 
-SeedBatch = SeedBatchFarsighter
-"""The batch class :func:`farsighter.agents.build_seed_agents` builds (``Algorithm.seed_batch``)."""
+SEED_AGENTS = SeedBatchFarsighter
+"""The class :func:`farsighter.agents.build_seed_agents` builds for seeds (``Algorithm.seed_batch``)."""

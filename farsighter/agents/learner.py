@@ -38,6 +38,7 @@ from farsighter.agents.cuda_graph import (
 )
 from farsighter.config import Config
 from farsighter.replay.target_cache import TargetCache, target_cache_rows
+from farsighter.stacked import load_member_optimizer_state, member_optimizer_state
 
 LossFn = Callable[[Tensors], Tensors]
 
@@ -55,9 +56,12 @@ class Learner:
         max_grad_norm: float | None = None,
         eager: bool = False,
         capture: bool = True,
+        seeds: int = 1,
     ) -> None:
         self.loss = loss
         self.params = list(params)
+        self.seeds = seeds  # > 1: stacked parameters, each seed's gradients clipped on their own
+        eager = eager or seeds > 1  # a seed batch's step runs eagerly (stack_refusal)
         self.opt = optimizer if optimizer is not None else make_optimizer(self.params, cfg)
         self.max_grad_norm = cfg.max_grad_norm if max_grad_norm is None else max_grad_norm
         # eager: a loss that reads the host (never captured or compiled, whatever the config);
@@ -73,7 +77,7 @@ class Learner:
 
     def _update(self, inputs: Tensors) -> Tensors:
         out = dict(self.loss(inputs))
-        clip_and_step(out["loss"], self.params, self.opt, self.max_grad_norm)
+        clip_and_step(out["loss"], self.params, self.opt, self.max_grad_norm, self.seeds)
         out["loss"] = out["loss"].detach()
         return out
 
@@ -91,6 +95,17 @@ class Learner:
         self.opt.load_state_dict(copy.deepcopy(state))
         set_capturable(self.opt, self.graphs)  # a loaded state brings the saver's flags
         reset_step(self.step)  # the optimizer's state tensors are new ones
+
+    def member_state(self, s: int) -> dict[str, Any]:
+        """Seed ``s``'s optimizer state, in the layout of its optimizer alone."""
+        return self.state_dict() if self.seeds == 1 else member_optimizer_state(self.opt, s)
+
+    def load_member(self, s: int, state: dict[str, Any]) -> None:
+        """Inverse of :meth:`member_state`."""
+        if self.seeds == 1:
+            self.load_state_dict(state)
+        else:
+            load_member_optimizer_state(self.opt, s, state)
 
     def forget_graphs(self) -> None:
         """Capture the update again at its next calls: the loss changed a branch its inputs do

@@ -67,8 +67,8 @@ class SeedAgents(Protocol):
     @property
     def seeds(self) -> int: ...
 
-    def act(self, obs_S: Sequence[np.ndarray], global_step: int) -> Sequence[np.ndarray]:
-        """Each seed's exploring actions for its own environments' observations."""
+    def act(self, obs_S: Sequence[np.ndarray], global_step: int) -> np.ndarray:
+        """Each seed's exploring actions for its own environments' observations, (S, E)."""
         ...
 
     def observe(self, steps: Sequence[VectorStep]) -> None:
@@ -93,8 +93,8 @@ class Alone:
     def __init__(self, agent: LearningAgent) -> None:
         self.agent = agent
 
-    def act(self, obs_S: Sequence[np.ndarray], global_step: int) -> list[np.ndarray]:
-        return [self.agent.act(obs_S[0], global_step)]
+    def act(self, obs_S: Sequence[np.ndarray], global_step: int) -> np.ndarray:
+        return self.agent.act(obs_S[0], global_step)[None]
 
     def observe(self, steps: Sequence[VectorStep]) -> None:
         self.agent.observe(steps[0])
@@ -104,6 +104,70 @@ class Alone:
 
     def member(self, s: int) -> LearningAgent:
         return self.agent
+
+
+class Sole:
+    """One seed of an agent written over the seed axis (:class:`SeedAgents` of one seed) as a
+    :class:`LearningAgent`: what :func:`farsighter.agents.build_agent` gives for one config (a
+    loaded policy, a probe). ``agents``: the seed-axis agent itself."""
+
+    def __init__(self, agents: SeedAgents) -> None:
+        self.agents = agents
+        self.seed = agents.member(0)
+
+    @classmethod
+    def of(cls, factory: SeedAgentsFactory) -> AgentFactory:
+        """The :class:`AgentFactory` of one seed of ``factory``'s agents."""
+
+        def build(
+            cfg: Config,
+            obs_space: gym.spaces.Box,
+            act_space: Any,
+            *,
+            frame_stack: int,
+            device: torch.device,
+        ) -> LearningAgent:
+            agents = factory([cfg], obs_space, act_space, frame_stack=frame_stack, device=device)
+            return cls(agents)
+
+        return build
+
+    def act(self, obs_E: np.ndarray, global_step: int, explore: bool = True) -> np.ndarray:
+        if not explore:
+            return self.seed.act(obs_E, global_step, explore=False)
+        return self.agents.act([obs_E], global_step)[0]
+
+    def observe(self, step: VectorStep) -> None:
+        self.agents.observe([step])
+
+    def learn(self, global_step: int) -> dict[str, torch.Tensor]:
+        return self.agents.learn(global_step)[0]
+
+    def diagnostics(self) -> dict[str, float]:
+        return self.seed.diagnostics()
+
+    def q_estimate(self, obs_B: np.ndarray) -> tuple[np.ndarray, np.ndarray | None]:
+        return self.seed.q_estimate(obs_B)
+
+    def state_dict(self, include_replay: bool = True) -> dict[str, Any]:
+        return self.seed.state_dict(include_replay)
+
+    def load_state_dict(self, state: dict[str, Any]) -> None:
+        self.seed.load_state_dict(state)
+
+
+class SeedAgentsFactory(Protocol):
+    """An agent class written over the seed axis: S configs that differ only in seed."""
+
+    def __call__(
+        self,
+        cfgs: Sequence[Config],
+        obs_space: gym.spaces.Box,
+        act_space: Any,
+        *,
+        frame_stack: int,
+        device: torch.device,
+    ) -> SeedAgents: ...
 
 
 class AgentFactory(Protocol):

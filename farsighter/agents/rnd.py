@@ -10,146 +10,124 @@
   Our choice: the intrinsic rewards of the window's next states s_{t+1..t+n} are computed when the
   minibatch is sampled, with the current predictor, not stored at collection.
 * The predictor takes one Adam step per update on the minibatch's observations s_t.
+
+Written once over a seed axis, on :class:`~farsighter.agents.ddqn.DDQNAgent`: each seed has its
+own bonus (target and predictor seeded seed + 4 and seed + 5, its Adam, its observation and
+intrinsic-reward statistics), computed and trained on that seed's rows in this order: the
+intrinsic returns of its minibatch (which update its reward statistics), the double-Q step on the
+returns with the bonus added (every seed at once), then one predictor step on its start
+observations. On CPU each seed of a batch trains bit for bit as it trains alone.
 """
 
 from __future__ import annotations
 
+import copy
+import dataclasses
+from collections.abc import Sequence
 from typing import Any
 
 import gymnasium as gym
-import numpy as np
 import torch
 
-from farsighter.agents.common import (
-    Counters,
-    batch_tensors,
-    build_seeded,
-    greedy_actions,
-    load_state,
-    make_replay,
-    obs_tensor,
-    sample_minibatch,
-    save_state,
-    sync_target,
-    updates_owed,
-)
-from farsighter.agents.ddqn import DoubleQLoss
-from farsighter.agents.learner import Learner
-from farsighter.agents.protocol import AgentFactory
+from farsighter.agents.common import TensorBatch, build_seeded
+from farsighter.agents.ddqn import DDQNAgent, DDQNMember, supports
+from farsighter.agents.protocol import AgentFactory, SeedAgentsFactory, Sole
 from farsighter.config import Config
-from farsighter.exploration import EpsilonGreedy
 from farsighter.exploration.rnd import RNDBonus
-from farsighter.networks import QNetwork, RNDNetwork
-from farsighter.replay import VectorStep
+from farsighter.networks import RNDNetwork
+from farsighter.replay import Batch, VectorStep
 
-BONUS_KEYS = ("rnd_target", "predictor", "rnd_opt", "obs_rms", "intrinsic_rms", "stats")
+__all__ = ["RNDAgent", "RNDMember", "make_bonus", "supports"]
+
+RND_STATEFUL = ("rnd_target", "predictor", "rnd_opt", "obs_rms", "intrinsic_rms")
+"""The pieces of an RND bonus saved by their ``state_dict`` (a seed's checkpoint keys)."""
 
 
-class RNDAgent:
+class RNDAgent(DDQNAgent):
     """DDQN with a random-network-distillation bonus added to the reward (module docstring)."""
 
     def __init__(
         self,
-        cfg: Config,
+        cfgs: Sequence[Config],
         obs_space: gym.spaces.Box,
         act_space: gym.spaces.Discrete,
         *,
         frame_stack: int,
         device: torch.device,
     ) -> None:
-        self.cfg = cfg
-        self.device = device
-        self.num_actions = int(act_space.n)
-        self.q = build_seeded(
-            cfg.seed, lambda: QNetwork(obs_space, self.num_actions, cfg.hidden_sizes)
-        ).to(device)
-        # DDQN's loss on the returns with the bonus added (module docstring)
-        self.loss = DoubleQLoss(self.q, cfg.loss)
-        self.learner = Learner(self.loss, self.q.parameters(), cfg, device)
-        self.bonus = make_bonus(cfg, obs_space, device)
-        self.replay = make_replay(cfg, obs_space, frame_stack, seed=cfg.seed + 1, device=device)
-        self.rng = np.random.default_rng(cfg.seed + 2)
-        self.explore = EpsilonGreedy(cfg, self.num_actions, self.rng)
-        self.counters = Counters(k=cfg.k)
+        super().__init__(cfgs, obs_space, act_space, frame_stack=frame_stack, device=device)
+        self.bonuses = [make_bonus(c, obs_space, device) for c in cfgs]
 
-    # ------------------------------------------------------------------ acting
-    def act(self, obs_E: np.ndarray, global_step: int, explore: bool = True) -> np.ndarray:
-        """Epsilon-greedy actions for a batch of environments (greedy when not exploring)."""
-        if not explore:
-            return self.greedy(obs_E)
-        return self.explore(global_step, lambda: self.greedy(obs_E), obs_E.shape[0])
+    def observe(self, steps: Sequence[VectorStep]) -> None:
+        super().observe(steps)
+        for bonus, st in zip(self.bonuses, steps, strict=True):
+            bonus.observe(st.obs_E)
 
-    def greedy(self, obs_E: np.ndarray) -> np.ndarray:
-        return greedy_actions(self.q, obs_E, self.device)
+    def returns(self, batch: Batch, t: TensorBatch) -> TensorBatch:
+        """Each seed's returns plus its weighted intrinsic k-step returns, from its own rows."""
+        B, w = self.cfg.batch_size, self.cfg.rnd.intrinsic_weight
+        if self.seeds == 1:
+            ri_B = torch.as_tensor(self.bonuses[0].returns(batch, self.replay), device=self.device)
+            return dataclasses.replace(t, returns_B=t.returns_B + w * ri_B)
+        returns_SB = t.returns_B.view(self.seeds, B)
+        with_bonus = []
+        for s, bonus in enumerate(self.bonuses):
+            rows = slice(s * B, (s + 1) * B)
+            mine = dataclasses.replace(
+                batch,
+                steps=batch.steps[rows],
+                env_index=batch.env_index[rows],
+                index=batch.index[rows],
+            )
+            ri_B = torch.as_tensor(bonus.returns(mine, self.replay), device=self.device)
+            with_bonus.append(returns_SB[s] + w * ri_B)
+        return dataclasses.replace(t, returns_B=torch.cat(with_bonus))
 
-    @torch.no_grad()
-    def q_estimate(self, obs_B: np.ndarray) -> tuple[np.ndarray, np.ndarray | None]:
-        """Q(s, .) for a batch of states; no posterior, so no variance."""
-        return self.q(obs_tensor(obs_B, self.device)).cpu().numpy(), None
+    def after_update(self, t: TensorBatch) -> None:
+        """One predictor step of each seed on its start observations (a copy for a seed of a
+        batch: its rows start where a tensor alone starts)."""
+        if self.seeds == 1:
+            self.bonuses[0].train(t.obs_B)
+            return
+        obs_SB = t.obs_B.view(self.seeds, self.cfg.batch_size, *t.obs_B.shape[1:])
+        for s, bonus in enumerate(self.bonuses):
+            bonus.train(obs_SB[s].clone())
 
-    def observe(self, step: VectorStep) -> None:
-        self.replay.add_step(step)
-        self.bonus.observe(step.obs_E)
+    def member(self, s: int) -> RNDMember:
+        return RNDMember(self, s)
 
-    # ------------------------------------------------------------------ learning
-    def learn(self, global_step: int) -> dict[str, torch.Tensor]:
-        metrics: dict[str, torch.Tensor] = {}
-        for _ in range(updates_owed(self.counters, self.cfg, global_step)):
-            metrics["td_loss"] = self.update()
-        sync_target(
-            self.counters, global_step, self.cfg.target_update_every, (self.q, self.loss.q_target)
-        )
-        return metrics
 
-    def update(self) -> torch.Tensor:
-        """One double-Q step on extrinsic + weighted intrinsic k-step returns, then one predictor
-        step on the same minibatch; returns the TD loss."""
-        cfg = self.cfg
-        batch = sample_minibatch(self.replay, cfg, cfg.batch_size, self.counters.k)
-        inputs = batch_tensors(batch, self.device).tensors()
-        ri_B = torch.as_tensor(self.bonus.returns(batch, self.replay), device=self.device)
-        inputs["returns_B"] = inputs["returns_B"] + cfg.rnd.intrinsic_weight * ri_B
-        loss = self.learner(inputs)["loss"]
-        self.bonus.train(inputs["obs_B"])
-        return loss
+class RNDMember(DDQNMember):
+    """One seed of an :class:`RNDAgent`, as an agent."""
+
+    batch: RNDAgent
 
     def diagnostics(self) -> dict[str, float]:
+        bonus = self.batch.bonuses[self.s]
         return {
-            "epsilon": self.explore.epsilon,
-            "k": float(self.counters.k),
-            "intrinsic_reward": self.bonus.stats["intrinsic_reward"],
-            "intrinsic_std": float(self.bonus.intrinsic_rms.std),
-            "predictor_loss": self.bonus.stats["predictor_loss"],
+            **super().diagnostics(),
+            "intrinsic_reward": bonus.stats["intrinsic_reward"],
+            "intrinsic_std": float(bonus.intrinsic_rms.std),
+            "predictor_loss": bonus.stats["predictor_loss"],
         }
 
-    # ------------------------------------------------------------------ checkpoints
-    SAVED = (
-        "q",
-        "q_target",
-        "opt",
-        "rnd_target",
-        "predictor",
-        "rnd_opt",
-        "obs_rms",
-        "intrinsic_rms",
-        "rng",
-        "epsilon",
-        "stats",
-        "counters",
-    )
-
-    SAVED_AT = {  # keys of the earlier layout
-        "q_target": "loss.q_target",
-        "opt": "learner",
-        "epsilon": "explore.epsilon",
-        **{key: f"bonus.{key}" for key in BONUS_KEYS},
-    }
-
     def state_dict(self, include_replay: bool = True) -> dict[str, Any]:
-        return save_state(self, self.SAVED, include_replay)
+        """This seed's checkpoint, the one its run alone writes."""
+        bonus = self.batch.bonuses[self.s]
+        return {
+            **super().state_dict(include_replay),
+            **{key: getattr(bonus, key).state_dict() for key in RND_STATEFUL},
+            "epsilon": self.batch.epsilon,
+            "stats": dict(bonus.stats),
+        }
 
     def load_state_dict(self, state: dict[str, Any]) -> None:
-        load_state(self, self.SAVED, state)
+        super().load_state_dict(state)
+        bonus = self.batch.bonuses[self.s]
+        for key in RND_STATEFUL:  # copies: never the caller's tensors
+            getattr(bonus, key).load_state_dict(copy.deepcopy(state[key]))
+        bonus.stats = dict(state["stats"])
+        self.batch.epsilon = state["epsilon"]
 
 
 def make_bonus(cfg: Config, obs_space: gym.spaces.Box, device: torch.device) -> RNDBonus:
@@ -170,4 +148,5 @@ def make_bonus(cfg: Config, obs_space: gym.spaces.Box, device: torch.device) -> 
     )
 
 
-AGENT: AgentFactory = RNDAgent  # the class farsighter.algorithms names; mypy checks the protocol
+SEED_AGENTS: SeedAgentsFactory = RNDAgent  # the class farsighter.algorithms names
+AGENT: AgentFactory = Sole.of(RNDAgent)  # one seed alone, as a LearningAgent

@@ -15,9 +15,9 @@ import gymnasium as gym
 import numpy as np
 import torch
 
-from farsighter.agents.common import row_bytes, uses_gpu_replay
+from farsighter.agents.common import make_replay, row_bytes, uses_gpu_replay
 from farsighter.config import Config
-from farsighter.replay.seeds import SeedReplay
+from farsighter.replay.seeds import OneSeedReplay, SeedReplay
 
 
 def stack_refusal(cfg: Config, obs_space: gym.Space | None) -> str:
@@ -30,11 +30,22 @@ def stack_refusal(cfg: Config, obs_space: gym.Space | None) -> str:
 
 
 def seed_replay(
-    cfgs: Sequence[Config], obs_space: gym.spaces.Box, device: torch.device
-) -> SeedReplay:
+    cfgs: Sequence[Config],
+    obs_space: gym.spaces.Box,
+    device: torch.device,
+    frame_stack: int = 1,
+    act_space: gym.Space | None = None,
+) -> SeedReplay | OneSeedReplay:
     """The seeds' replays in one buffer: each seed's streams and generator (seed + 1), as its
-    agent alone makes them (discrete actions as int32)."""
+    agent alone makes them (discrete actions as int32); one seed's replay alone for one seed
+    (:func:`farsighter.agents.common.make_replay`: frame stacks, Box actions)."""
     cfg = cfgs[0]
+    if len(cfgs) == 1:
+        replay = make_replay(
+            cfg, obs_space, frame_stack, cfg.seed + 1, act_space, device, kind=OneSeedReplay
+        )
+        assert isinstance(replay, OneSeedReplay)
+        return replay
     return SeedReplay(
         [c.seed + 1 for c in cfgs],
         cfg.buffer_size,

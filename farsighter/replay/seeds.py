@@ -137,3 +137,29 @@ class SeedReplay(ReplayBuffer):
         if self.mirror is not None:
             rows = np.arange(streams.start * self.capacity, streams.stop * self.capacity)
             self._to_mirror(rows.astype(np.int64))
+
+
+class OneSeedReplay(ReplayBuffer):
+    """One seed's replay behind :class:`SeedReplay`'s surface (an agent written over the seed
+    axis, run alone): its streams, its generator and its checkpoint are the replay alone's."""
+
+    @property
+    def seeds(self) -> int:
+        return 1
+
+    def seed_streams(self, s: int) -> slice:
+        return slice(0, self.num_envs)
+
+    def sample_seeds(self, batch_size: int, **kwargs: Any) -> Batch:
+        return self.sample(batch_size, **kwargs)
+
+    def add_steps(
+        self, steps: Sequence[VectorStep], exploratory_SE: np.ndarray | None = None
+    ) -> None:
+        self.add_step(steps[0], None if exploratory_SE is None else exploratory_SE[0])
+
+    def member_state(self, s: int) -> dict[str, Any]:
+        return self.state_dict()
+
+    def load_member(self, s: int, state: dict[str, Any]) -> None:
+        self.load_state_dict(state)
