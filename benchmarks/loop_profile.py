@@ -94,13 +94,12 @@ class _TimedPool:
 @contextmanager
 def phase_timers(algo: str, timer: PhaseTimer) -> Iterator[None]:
     """Wrap the agent class's act/observe/learn and the vector env's step for the block."""
-    import importlib
 
-    from farsighter import algorithms
+    from farsighter.agents import loop_class
     from farsighter.envs.envpool_vec import EnvpoolAtariVector
     from farsighter.envs.vector import LeanSyncVectorEnv
 
-    cls = importlib.import_module(f"farsighter.agents.{algorithms.get(algo).agent}").AGENT
+    cls = loop_class(algo)
     patched: list[tuple[Any, str, Any]] = []
     for name in ("act", "observe", "learn"):
         patched.append((cls, name, getattr(cls, name)))

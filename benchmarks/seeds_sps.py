@@ -158,7 +158,7 @@ def profile_one(
     timed = phase_timer(spent)
 
     module = algorithms.get(algo).seed_batch
-    batch_class = importlib.import_module(f"farsighter.agents.{module}").SeedBatch
+    batch_class = importlib.import_module(f"farsighter.agents.{module}").SEED_AGENTS
     for name in ("greedy", "act", "observe", "learn"):
         if hasattr(batch_class, name):  # Farsighter's act computes its forward itself
             setattr(batch_class, name, timed(name, getattr(batch_class, name)))

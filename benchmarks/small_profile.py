@@ -68,7 +68,8 @@ def profile(algo: str, env: str, steps: int, values: dict[str, Any]) -> dict[str
 
     import torch
 
-    from farsighter import algorithms, make_config
+    from farsighter import make_config
+    from farsighter.agents import loop_class
     from farsighter.session import RunLog
 
     train_module = importlib.import_module("farsighter.train")
@@ -76,7 +77,7 @@ def profile(algo: str, env: str, steps: int, values: dict[str, Any]) -> dict[str
     seconds: dict[str, float] = defaultdict(float)
     timed = phase_timer(seconds)
 
-    agent_cls = importlib.import_module(f"farsighter.agents.{algorithms.get(algo).agent}").AGENT
+    agent_cls = loop_class(algo)
     for name in ("act", "observe", "learn"):
         setattr(agent_cls, name, timed(name, getattr(agent_cls, name)))
     RunLog.step = timed("log.step", RunLog.step)  # type: ignore[method-assign]

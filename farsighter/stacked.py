@@ -240,6 +240,12 @@ class StackedQNetwork(nn.Module):
         # them round as the agent alone's do)
         return aligned(relu(x)) if self.relu_last else x
 
+    def rows(self, obs: torch.Tensor) -> torch.Tensor:
+        """:meth:`forward` on the seeds' rows laid end to end, seed 0's first: (S * B, ...) in,
+        (S * B, ...) out (the layout of a seed-axis agent's minibatch)."""
+        S = self._params[0].shape[0]
+        return self(obs.view(S, -1, *obs.shape[1:])).flatten(0, 1)
+
     def psi(self, obs_SB: torch.Tensor) -> torch.Tensor | None:
         """The random features of observations (None without a random layer), for
         :meth:`forward` of this network and of its target."""
@@ -305,6 +311,11 @@ class OneSeed(nn.Module):
 
     def forward(self, obs_SB: torch.Tensor) -> torch.Tensor:
         return self.net(obs_SB[0]).unsqueeze(0)  # type: ignore[no-any-return]
+
+    def rows(self, obs: torch.Tensor) -> torch.Tensor:
+        """The network alone on the seed's rows (:meth:`StackedQNetwork.rows`): no seed axis
+        to add or take away, so an update or an action costs what the network alone costs."""
+        return self.net(obs)  # type: ignore[no-any-return]
 
     def member_forward(self, obs_B: torch.Tensor, s: int) -> torch.Tensor:
         return self.net(obs_B)  # type: ignore[no-any-return]

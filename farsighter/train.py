@@ -149,6 +149,8 @@ class _Seed:
     state: LoopState
     log: RunLog
     callbacks: Sequence[Callback]
+    agent: Agent
+    """The seed as an agent (the seed-axis agents' member): what its log and callbacks see."""
 
 
 def run_seeds(
@@ -174,7 +176,6 @@ def run_seeds(
         mininterval=1.0,
         desc=f"{cfg.algo} {cfg.env} {S} seeds",
     )
-    members = [agents.member(s) for s in range(S)]
     try:
         while step < cfg.total_steps:
             actions_S = agents.act([run.obs for run in runs], step)
@@ -197,18 +198,18 @@ def run_seeds(
             agents.observe(steps)
             if not overlap:
                 metrics = agents.learn(step)
-            for run, member, info, mine in zip(runs, members, infos, metrics, strict=True):
+            for run, info, mine in zip(runs, infos, metrics, strict=True):
                 run.state.global_step = step
                 run.log.after_step(
-                    run.state, prev, info, mine, member, run.envs, run.obs, run.callbacks
+                    run.state, prev, info, mine, run.agent, run.envs, run.obs, run.callbacks
                 )
             bar.update(cfg.num_envs * S)
             if requested() and step < cfg.total_steps:  # SIGINT / SIGTERM: every seed saved
-                for run, member in zip(runs, members, strict=True):
-                    run.log.checkpoint(run.state, member, run.envs, run.obs)
+                for run in runs:
+                    run.log.checkpoint(run.state, run.agent, run.envs, run.obs)
                 raise interrupted(step, ", ".join(str(run.path) for run in runs))
-        for run, member in zip(runs, members, strict=True):
-            run.log.finish(run.state, member, run.envs, run.obs, run.callbacks)
+        for run in runs:
+            run.log.finish(run.state, run.agent, run.envs, run.obs, run.callbacks)
         return [run.log.summary(run.state) for run in runs]
     finally:
         bar.close()
@@ -259,7 +260,7 @@ def _start(
                 state, (obs, _) = LoopState(), envs[s].reset(seed=c.seed)
             # one progress bar: the run's own, or the batch's below
             log = RunLog(path, c if S == 1 else replace(c, progress=False), state, c.resume, hooks)
-            runs.append(_Seed(c, path, envs[s], obs, state, log, hooks))
+            runs.append(_Seed(c, path, envs[s], obs, state, log, hooks, member))
     except BaseException:  # what was opened so far (the logs' W&B runs end as failed)
         for run in runs:
             run.log.close()

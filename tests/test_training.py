@@ -10,7 +10,7 @@ import pytest
 import torch
 
 import farsighter
-from farsighter.agents import Alone, build_seed_agents
+from farsighter.agents import loop_class
 from farsighter.agents.ddqn import DDQNAgent
 from farsighter.errors import RunDirError
 from farsighter.replay import VectorStep
@@ -70,10 +70,7 @@ def test_crash_then_resume_equals_uninterrupted(
     farsighter.train(tiny(algo, full))
 
     crashed = tmp_path / "crashed"
-    agents = build_seed_agents(  # the class the loop will use
-        [tiny(algo, crashed)], *_spaces(), frame_stack=1, device=torch.device("cpu")
-    )
-    agent_cls = type(agents.agent) if isinstance(agents, Alone) else type(agents)
+    agent_cls = loop_class(algo)  # the class the loop will use
     original = agent_cls.learn
 
     def learn_then_crash(self, global_step: int):  # type: ignore[no-untyped-def]
@@ -179,10 +176,7 @@ def test_resume_without_replay_refills_before_updating(
     run = tmp_path / "run"
     farsighter.train(tiny(algo, run, total_steps=1_000, save_replay=False, **extra))
     saved = load_checkpoint(run)["agent"]
-    agents = build_seed_agents(  # the class the loop will use
-        [tiny(algo, run)], *_spaces(), frame_stack=1, device=torch.device("cpu")
-    )
-    agent_cls = type(agents.agent) if isinstance(agents, Alone) else type(agents)
+    agent_cls = loop_class(algo)  # the class the loop will use
     calls: list[int] = []
     original = agent_cls.update
 

@@ -8,6 +8,7 @@ from __future__ import annotations
 
 import importlib
 from collections.abc import Sequence
+from typing import Any
 
 import gymnasium as gym
 import torch
@@ -33,6 +34,7 @@ __all__ = [
     "SeedAgents",
     "build_agent",
     "build_seed_agents",
+    "loop_class",
 ]
 
 
@@ -45,14 +47,32 @@ def build_agent(
     device: torch.device,
 ) -> LearningAgent:
     """The agent of ``cfg.algo`` (its module of the algorithm table is imported on first use)."""
-    spec = algorithms.get(cfg.algo)
     if not isinstance(obs_space, gym.spaces.Box):  # farsighter.envs.check_spaces says why
         raise TypeError(f"{cfg.algo} needs a Box observation space, got {obs_space}")
-    factory: AgentFactory = importlib.import_module(f"farsighter.agents.{spec.agent}").AGENT
+    module = _module(cfg.algo)
+    if hasattr(module, "SEED_AGENTS"):  # written over the seed axis: its one seed
+        agents = build_seed_agents(
+            [cfg], obs_space, act_space, frame_stack=frame_stack, device=device
+        )
+        return Sole(agents)
+    factory: AgentFactory = module.AGENT
     agent = factory(cfg, obs_space, act_space, frame_stack=frame_stack, device=device)
-    for net in networks(agent.agents if isinstance(agent, Sole) else agent):
+    for net in networks(agent):
         set_precision(net, cfg.runtime.precision)
     return agent
+
+
+def loop_class(algo: str) -> type:
+    """The class whose ``act``, ``observe`` and ``learn`` the training loop calls for a run of
+    ``algo`` alone: its agent written over the seed axis (``SEED_AGENTS``), else its ``AGENT``
+    (driven through :class:`Alone`)."""
+    module = _module(algo)
+    return getattr(module, "SEED_AGENTS", None) or module.AGENT  # type: ignore[no-any-return]
+
+
+def _module(algo: str) -> Any:
+    """The module of ``farsighter.agents`` that trains ``algo`` (imported on first use)."""
+    return importlib.import_module(f"farsighter.agents.{algorithms.get(algo).agent}")
 
 
 def build_seed_agents(
@@ -70,12 +90,12 @@ def build_seed_agents(
     spec = algorithms.get(cfgs[0].algo)
     if not isinstance(obs_space, gym.spaces.Box):  # farsighter.envs.check_spaces says why
         raise TypeError(f"{spec.name} needs a Box observation space, got {obs_space}")
-    module = importlib.import_module(f"farsighter.agents.{spec.agent}")
-    if len(cfgs) == 1 and not hasattr(module, "SEED_AGENTS"):
-        return Alone(
-            build_agent(cfgs[0], obs_space, act_space, frame_stack=frame_stack, device=device)
-        )
+    module = _module(spec.name)
     if not hasattr(module, "SEED_AGENTS"):
+        if len(cfgs) == 1:
+            return Alone(
+                build_agent(cfgs[0], obs_space, act_space, frame_stack=frame_stack, device=device)
+            )
         if not spec.seed_batch:
             raise ValueError(f"{spec.name} has no seed-batched form")
         module = importlib.import_module(f"farsighter.agents.{spec.seed_batch}")

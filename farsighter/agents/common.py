@@ -174,12 +174,19 @@ def td_loss(pred_B: torch.Tensor, target_B: torch.Tensor, kind: str) -> torch.Te
     return torch.nn.functional.smooth_l1_loss(pred_B, target_B)
 
 
-def elementwise_td_loss(pred: torch.Tensor, target: torch.Tensor, kind: str) -> torch.Tensor:
-    """:func:`td_loss` before its mean, per element (the seed-batched agents take each seed's
-    mean themselves)."""
-    if kind == "mse":
-        return torch.nn.functional.mse_loss(pred, target, reduction="none")
-    return torch.nn.functional.smooth_l1_loss(pred, target, reduction="none")
+def seed_td_losses(
+    pred: torch.Tensor, target: torch.Tensor, kind: str, seeds: int
+) -> tuple[torch.Tensor, torch.Tensor]:
+    """The loss to differentiate and each seed's :func:`td_loss` over its own rows, (S,), for
+    rows laid seed after seed. The loss is the sum of the seeds' means (each seed's gradient is
+    its own loss's); for one seed it is :func:`td_loss` itself (the same numbers, a smaller graph:
+    the update of a small network costs a tenth less)."""
+    if seeds == 1:
+        loss = td_loss(pred, target, kind)
+        return loss, loss.detach().unsqueeze(0)
+    fn = torch.nn.functional.mse_loss if kind == "mse" else torch.nn.functional.smooth_l1_loss
+    loss_S = fn(pred.view(seeds, -1), target.view(seeds, -1), reduction="none").mean(1)
+    return loss_S.sum(), loss_S.detach()
 
 
 def clip_and_step(

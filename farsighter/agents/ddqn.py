@@ -16,6 +16,7 @@ from __future__ import annotations
 import copy
 import dataclasses
 from collections.abc import Sequence
+from functools import partial
 from typing import Any, cast
 
 import gymnasium as gym
@@ -27,18 +28,18 @@ from farsighter.agents.common import (
     TensorBatch,
     batch_tensors,
     build_seeded,
-    elementwise_td_loss,
     minibatch_args,
     obs_tensor,
+    seed_td_losses,
     sync_target,
     updates_owed,
 )
 from farsighter.agents.cuda_graph import Tensors
 from farsighter.agents.learner import Learner
-from farsighter.agents.protocol import AgentFactory, SeedAgentsFactory, Sole
+from farsighter.agents.protocol import SeedAgentsFactory
 from farsighter.agents.seed_members import Member, seed_replay, stack_refusal
 from farsighter.config import Config
-from farsighter.exploration.epsilon import epsilon_draws, epsilon_greedy, linear_schedule
+from farsighter.exploration.epsilon import epsilon_greedy, linear_schedule
 from farsighter.networks import QNetwork, online_and_target
 from farsighter.ops.targets import double_q_target
 from farsighter.replay import Batch, VectorStep
@@ -60,9 +61,6 @@ class DoubleQLoss:
         self.q, self.q_target = q, q_target.requires_grad_(False)
         self.kind, self.seeds = kind, seeds
 
-    def by_seed(self, x: torch.Tensor) -> torch.Tensor:
-        return x.view(self.seeds, -1, *x.shape[1:])
-
     @torch.no_grad()
     def targets(self, t: TensorBatch) -> torch.Tensor:
         """y = R + gamma^n Q_target(s_{t+n}, argmax_a Q(s_{t+n}, a)), no bootstrap at a terminal;
@@ -71,17 +69,14 @@ class DoubleQLoss:
             online, target = cast(QNetwork, self.q.net), cast(QNetwork, self.q_target.net)
             q_next, q_next_target = online_and_target(online, target, t.next_obs_B)
         else:
-            next_SB = self.by_seed(t.next_obs_B)
-            q_next = self.q(next_SB).flatten(0, 1)
-            q_next_target = self.q_target(next_SB).flatten(0, 1)
+            q_next, q_next_target = self.q.rows(t.next_obs_B), self.q_target.rows(t.next_obs_B)
         return double_q_target(t.returns_B, t.bootstrap_B, q_next, q_next_target)
 
     def __call__(self, inputs: Tensors) -> Tensors:
         t = TensorBatch.of(inputs)
-        q_SBA = self.q(self.by_seed(t.obs_B))
-        q_SB = q_SBA.gather(2, self.by_seed(t.actions_B).unsqueeze(2)).squeeze(2)
-        loss_S = elementwise_td_loss(q_SB, self.by_seed(self.targets(t)), self.kind).mean(1)
-        return {"loss": loss_S.sum(), "loss_S": loss_S.detach()}
+        q_B = self.q.rows(t.obs_B).gather(1, t.actions_B.unsqueeze(1)).squeeze(1)
+        loss, loss_S = seed_td_losses(q_B, self.targets(t), self.kind, self.seeds)
+        return {"loss": loss, "loss_S": loss_S}
 
 
 class DDQNAgent:
@@ -120,20 +115,28 @@ class DDQNAgent:
     def greedy(self, obs_S: Sequence[np.ndarray]) -> np.ndarray:
         """argmax_a Q(s, a) of every seed's network on its own observations, (S, E)."""
         with torch.inference_mode():
-            obs = obs_tensor(np.stack(obs_S), self.device)
-            return self.q(obs).argmax(dim=2).cpu().numpy()
+            obs = obs_tensor(obs_S[0] if self.seeds == 1 else np.concatenate(obs_S), self.device)
+            return self.q.rows(obs).argmax(dim=1).view(self.seeds, -1).cpu().numpy()
 
     def act(self, obs_S: Sequence[np.ndarray], global_step: int) -> np.ndarray:
-        """Each seed's epsilon-greedy actions from its own generator (the coins, then the
-        random actions), (S, E); the greedy forward only when some environment needs it."""
+        """Each seed's epsilon-greedy actions from its own generator (:func:`epsilon_greedy`),
+        (S, E); one greedy forward for every seed, made only when some environment needs it."""
         cfg = self.cfg
         self.epsilon = linear_schedule(cfg.eps_start, cfg.eps_end, cfg.eps_decay_steps, global_step)
-        draws = [epsilon_draws(rng, self.num_actions, len(obs_S[0])) for rng in self.rngs]
-        random_SE = np.stack([coins for coins, _ in draws]) < self.epsilon
-        random_actions_SE = np.stack([actions for _, actions in draws])
-        if random_SE.all():
-            return random_actions_SE
-        return np.where(random_SE, random_actions_SE, self.greedy(obs_S))
+        greedy_SE: list[np.ndarray] = []
+
+        def greedy(s: int) -> np.ndarray:
+            if not greedy_SE:
+                greedy_SE.extend(self.greedy(obs_S))
+            return greedy_SE[s]
+
+        n, A = len(obs_S[0]), self.num_actions
+        return np.stack(
+            [
+                epsilon_greedy(rng, self.epsilon, A, partial(greedy, s), n)
+                for s, rng in enumerate(self.rngs)
+            ]
+        )
 
     def observe(self, steps: Sequence[VectorStep]) -> None:
         """One vector step of every seed, in seed order, into the seeds' streams."""
@@ -227,4 +230,3 @@ class DDQNMember(Member):
 
 
 SEED_AGENTS: SeedAgentsFactory = DDQNAgent  # the class farsighter.algorithms names
-AGENT: AgentFactory = Sole.of(DDQNAgent)  # one seed alone, as a LearningAgent

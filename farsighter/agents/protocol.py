@@ -4,8 +4,9 @@ The loop drives :class:`SeedAgents`: S seeds of one config (S = 1 for a run alon
 record steps and learn together. One seed of them is an :class:`Agent`, the surface the run log,
 evaluation, callbacks, checkpoints and a loaded policy use. An agent class that trains one seed
 is a :class:`LearningAgent` (an Agent that also records steps and learns); each such module ends
-with ``AGENT: AgentFactory = ItsClass``, and mypy checks the class's constructor against
-:class:`AgentFactory` and its instances against the protocol. Arrays carry their shape in a
+with ``AGENT: AgentFactory = ItsClass``, and an agent written over the seed axis with
+``SEED_AGENTS: SeedAgentsFactory = ItsClass``; mypy checks the class's constructor against the
+factory and its instances against the protocol. Arrays carry their shape in a
 suffix: S seeds, E environments, B rows, A actions.
 """
 
@@ -114,23 +115,6 @@ class Sole:
     def __init__(self, agents: SeedAgents) -> None:
         self.agents = agents
         self.seed = agents.member(0)
-
-    @classmethod
-    def of(cls, factory: SeedAgentsFactory) -> AgentFactory:
-        """The :class:`AgentFactory` of one seed of ``factory``'s agents."""
-
-        def build(
-            cfg: Config,
-            obs_space: gym.spaces.Box,
-            act_space: Any,
-            *,
-            frame_stack: int,
-            device: torch.device,
-        ) -> LearningAgent:
-            agents = factory([cfg], obs_space, act_space, frame_stack=frame_stack, device=device)
-            return cls(agents)
-
-        return build
 
     def act(self, obs_E: np.ndarray, global_step: int, explore: bool = True) -> np.ndarray:
         if not explore:

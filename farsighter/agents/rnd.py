@@ -31,7 +31,7 @@ import torch
 
 from farsighter.agents.common import TensorBatch, build_seeded
 from farsighter.agents.ddqn import DDQNAgent, DDQNMember, supports
-from farsighter.agents.protocol import AgentFactory, SeedAgentsFactory, Sole
+from farsighter.agents.protocol import SeedAgentsFactory
 from farsighter.config import Config
 from farsighter.exploration.rnd import RNDBonus
 from farsighter.networks import RNDNetwork
@@ -66,9 +66,6 @@ class RNDAgent(DDQNAgent):
     def returns(self, batch: Batch, t: TensorBatch) -> TensorBatch:
         """Each seed's returns plus its weighted intrinsic k-step returns, from its own rows."""
         B, w = self.cfg.batch_size, self.cfg.rnd.intrinsic_weight
-        if self.seeds == 1:
-            ri_B = torch.as_tensor(self.bonuses[0].returns(batch, self.replay), device=self.device)
-            return dataclasses.replace(t, returns_B=t.returns_B + w * ri_B)
         returns_SB = t.returns_B.view(self.seeds, B)
         with_bonus = []
         for s, bonus in enumerate(self.bonuses):
@@ -84,14 +81,12 @@ class RNDAgent(DDQNAgent):
         return dataclasses.replace(t, returns_B=torch.cat(with_bonus))
 
     def after_update(self, t: TensorBatch) -> None:
-        """One predictor step of each seed on its start observations (a copy for a seed of a
-        batch: its rows start where a tensor alone starts)."""
-        if self.seeds == 1:
-            self.bonuses[0].train(t.obs_B)
-            return
+        """One predictor step of each seed on its start observations: seed 0's rows start where
+        the minibatch starts, the others' are copied so that they start where a tensor alone
+        starts (as a seed alone's do)."""
         obs_SB = t.obs_B.view(self.seeds, self.cfg.batch_size, *t.obs_B.shape[1:])
         for s, bonus in enumerate(self.bonuses):
-            bonus.train(obs_SB[s].clone())
+            bonus.train(obs_SB[s].clone() if s else obs_SB[s])
 
     def member(self, s: int) -> RNDMember:
         return RNDMember(self, s)
@@ -149,4 +144,3 @@ def make_bonus(cfg: Config, obs_space: gym.spaces.Box, device: torch.device) -> 
 
 
 SEED_AGENTS: SeedAgentsFactory = RNDAgent  # the class farsighter.algorithms names
-AGENT: AgentFactory = Sole.of(RNDAgent)  # one seed alone, as a LearningAgent
