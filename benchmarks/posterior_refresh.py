@@ -35,7 +35,7 @@ def build(mode: str, samples: int, threads: int) -> FarsighterAgent:
     )
     obs_space = gym.spaces.Box(0, 255, (4, 84, 84), np.uint8)
     agent = FarsighterAgent(
-        cfg, obs_space, gym.spaces.Discrete(18), frame_stack=4, device=torch.device("cpu")
+        [cfg], obs_space, gym.spaces.Discrete(18), frame_stack=4, device=torch.device("cpu")
     )
     rng = np.random.default_rng(0)
     frame = np.zeros((1, 4, 84, 84), np.uint8)
@@ -45,7 +45,7 @@ def build(mode: str, samples: int, threads: int) -> FarsighterAgent:
             rng.integers(0, 255, size=(84, 84), dtype=np.uint8) if i < 64 else frame[0, -1]
         )
         frame[0, -1, i % 84, :] = i % 255  # distinct frames without 100k random draws
-        agent.observe(VectorStep(frame, np.array([i % 18]), np.array([0.0]), no, no, None))
+        agent.observe([VectorStep(frame, np.array([i % 18]), np.array([0.0]), no, no, None)])
     return agent
 
 

@@ -20,7 +20,7 @@ falls on all of them alike.
 ``--algo farsighter`` runs Farsighter (the library's defaults: the ``general`` preset, k = 10,
 a draw held for k steps) with the same task settings (``--tasks mountaincar``: MountainCar-v0
 with the defaults, 10k steps, not part of the goal), batched by
-:class:`farsighter.agents.farsighter_seeds.SeedBatchFarsighter`.
+:class:`farsighter.agents.farsighter.FarsighterAgent`.
 
 ``--phases`` instead times where a batch step goes (one child per task, 16 seeds, one thread):
 microseconds per batch step in the batch's ``greedy`` forward, the rest of ``act`` (each seed's

@@ -69,7 +69,7 @@ TABLE: tuple[Algorithm, ...] = (
         "Thompson sampling on a Bayesian linear regression Q-head, 1-step (section 4.2)",
         bayesian=True,
         agent="farsighter",
-        seed_batch="farsighter_seeds",
+        seed_batch="farsighter",
         actions="discrete",
         fast_step=True,
         # A new weight draw every T^sample = 1,000 steps as in Azizzadenesheli et al. (2018);
@@ -81,7 +81,7 @@ TABLE: tuple[Algorithm, ...] = (
         "Thompson draw every step over k-step returns from recent transitions (Algorithms 1-2)",
         bayesian=True,
         agent="farsighter",
-        seed_batch="farsighter_seeds",
+        seed_batch="farsighter",
         actions="discrete",
         fast_step=True,
         # Fresh draw every step (Algorithm 2), k-step returns, minibatches from the latest N

@@ -18,7 +18,7 @@ would write.
 from __future__ import annotations
 
 from collections.abc import Sequence
-from typing import Any
+from typing import Any, cast
 
 import torch
 import torch.nn.functional as F
@@ -29,6 +29,7 @@ from farsighter.networks import (
     QNetwork,
     RandomFeatureKind,
     RandomFeatureTorso,
+    online_and_target,
     random_feature_map,
 )
 from farsighter.ops.onehot import hot_rows, stacked_gathered_linear
@@ -205,11 +206,13 @@ class StackedQNetwork(nn.Module):
         self.buffer_names: list[str] = []
         if self.rf_width:  # each seed's random layer, drawn under its own seed (never trained)
             for name in ("rf_weight", "rf_bias"):
-                self.register_buffer(name, _stacked([getattr(net, name) for net in nets]))
+                self.register_buffer(name, stack_aligned([getattr(net, name) for net in nets]))
                 self.buffer_names.append(name)
         self.names = [name for name, _ in nets[0].named_parameters()]
         self.weights = nn.ParameterList(
-            nn.Parameter(_stacked([dict(net.named_parameters())[name].detach() for net in nets]))
+            nn.Parameter(
+                stack_aligned([dict(net.named_parameters())[name].detach() for net in nets])
+            )
             for name in self.names
         )
         self._params = list(self.weights)
@@ -243,8 +246,21 @@ class StackedQNetwork(nn.Module):
     def rows(self, obs: torch.Tensor) -> torch.Tensor:
         """:meth:`forward` on the seeds' rows laid end to end, seed 0's first: (S * B, ...) in,
         (S * B, ...) out (the layout of a seed-axis agent's minibatch)."""
-        S = self._params[0].shape[0]
-        return self(obs.view(S, -1, *obs.shape[1:])).flatten(0, 1)
+        return self(self.by_seed(obs)).flatten(0, 1)
+
+    @property
+    def seeds(self) -> int:
+        return int(self._params[0].shape[0])
+
+    def by_seed(self, rows: torch.Tensor) -> torch.Tensor:
+        """Rows laid seed after seed as (S, B, ...) (a view)."""
+        return rows.view(self.seeds, -1, *rows.shape[1:])
+
+    def each_seed(self, obs: torch.Tensor) -> list[torch.Tensor]:
+        """Each seed's outputs on its rows of ``obs`` (laid seed after seed), one tensor a seed
+        (slices of one forward: each seed's backward gives its slice's gradient alone, where
+        indexing S times would give S zero-filled (S, B, D) gradients to add)."""
+        return list(self(self.by_seed(obs)).unbind(0))
 
     def psi(self, obs_SB: torch.Tensor) -> torch.Tensor | None:
         """The random features of observations (None without a random layer), for
@@ -317,6 +333,14 @@ class OneSeed(nn.Module):
         to add or take away, so an update or an action costs what the network alone costs."""
         return self.net(obs)  # type: ignore[no-any-return]
 
+    seeds = 1
+
+    def by_seed(self, rows: torch.Tensor) -> torch.Tensor:
+        return rows.unsqueeze(0)
+
+    def each_seed(self, obs: torch.Tensor) -> list[torch.Tensor]:
+        return [self.net(obs)]
+
     def member_forward(self, obs_B: torch.Tensor, s: int) -> torch.Tensor:
         return self.net(obs_B)  # type: ignore[no-any-return]
 
@@ -338,7 +362,35 @@ def seed_network(nets: Sequence[nn.Module]) -> SeedNetwork:
     return OneSeed(nets[0]) if len(nets) == 1 else StackedQNetwork(nets)
 
 
-def _stacked(tensors: Sequence[torch.Tensor]) -> torch.Tensor:
+def online_and_target_seeds(
+    online: SeedNetwork, target: SeedNetwork | None, obs: torch.Tensor
+) -> tuple[torch.Tensor, torch.Tensor | None]:
+    """Every seed's ``online`` and ``target`` (None: not computed) on its rows of ``obs`` (laid
+    seed after seed), (S, B, ...) each: for one seed the networks alone, the observations
+    prepared once (:func:`farsighter.networks.online_and_target`); for several one stacked
+    forward each over the same random features (a random layer is never trained, so an online
+    network and its target share it)."""
+    if isinstance(online, OneSeed):
+        if target is None:
+            return online.net(obs).unsqueeze(0), None
+        assert isinstance(target, OneSeed)
+        pair = online_and_target(cast(Any, online.net), cast(Any, target.net), obs)
+        return pair[0].unsqueeze(0), pair[1].unsqueeze(0)
+    obs_SB = online.by_seed(obs)
+    psi = online.psi(obs_SB)
+    return online(obs_SB, psi), None if target is None else target(obs_SB, psi)
+
+
+def member_pair(
+    online: SeedNetwork, target: SeedNetwork, obs_B: torch.Tensor, s: int
+) -> tuple[torch.Tensor, torch.Tensor]:
+    """Seed ``s``'s ``online`` and ``target`` networks alone on ``obs_B``."""
+    if isinstance(online, OneSeed) and isinstance(target, OneSeed):
+        return online_and_target(cast(Any, online.net), cast(Any, target.net), obs_B)
+    return online.member_forward(obs_B, s), target.member_forward(obs_B, s)
+
+
+def stack_aligned(tensors: Sequence[torch.Tensor]) -> torch.Tensor:
     """The tensors stacked along a new seed axis, each seed's slice aligned (:data:`ALIGN`)."""
     out = aligned_empty((len(tensors), *tensors[0].shape), tensors[0])
     with torch.no_grad():

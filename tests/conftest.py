@@ -32,6 +32,25 @@ def inner(agent: Any) -> Any:
     return getattr(agent, "agents", None) or getattr(agent, "batch", None) or agent
 
 
+def parts(agent: Any, s: int = 0) -> Any:
+    """Seed ``s``'s own parts of a Farsighter or BDQN agent (alone: a ``Sole``; or the agent
+    written over the seed axis itself, or a member: its own seed): its posterior ``head``,
+    ``target_mean_AD``, ``counters``, ``exploration``, generators, ``calibrated``, ``blr``,
+    ``k_target``, ``draws``."""
+    own = getattr(agent, "parts", None)
+    return own if own is not None and not isinstance(own, list) else inner(agent).parts[s]
+
+
+def eq8(agent: Any, t: Any, draws: Any = None, cached: Any = None) -> Any:
+    """Seed 0's y of Eq. 8 on the rows ``t`` (a TensorBatch) of a Farsighter agent of one seed,
+    with its ``draws`` (``SeedParts.draws``'s names) and the cached target features of s'."""
+    loss = inner(agent).loss
+    inputs = {**t.tensors(), **{f"{k}@0": v for k, v in (draws or {}).items()}}
+    if cached is not None:
+        inputs["phi_next_target_BD"] = cached
+    return loss.targets(t, inputs)[0]
+
+
 def tiny(algo: str, run_dir: Path, env: str = "CartPole-v1", **kw: Any) -> Config:
     values: dict[str, Any] = dict(
         total_steps=1_500,

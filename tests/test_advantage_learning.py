@@ -14,6 +14,7 @@ from farsighter.agents.farsighter_targets import TensorBatch
 from farsighter.config import make_config, validate
 from farsighter.errors import ConfigError
 from farsighter.ops.targets import advantage_learning
+from tests.conftest import inner, parts
 from tests.test_exploration_defaults import make_agent
 
 
@@ -53,7 +54,7 @@ def _minibatch(n: int = 16) -> dict[str, torch.Tensor]:
         "actions_B": torch.arange(n) % 2,
         "returns_B": torch.rand(n, generator=g),
         "bootstrap_B": torch.full((n,), 0.9),
-        "eps_BA": torch.zeros(n, 2),  # the optimistic targets' draws, none
+        "eps_BA@0": torch.zeros(n, 2),  # the optimistic targets' draws, none
     }
 
 
@@ -66,21 +67,23 @@ def test_the_update_and_the_statistics_train_on_the_lowered_targets(tmp_path: Pa
         make_agent(tmp_path / "a", **values),
         make_agent(tmp_path / "p", **{"preset": "general", "blr.advantage_learning": 0.0}),
     )
-    for loss in (agent.loss, plain.loss):
-        loss.torso_target.load_state_dict(agent.loss.torso.state_dict())
-        loss.torso.load_state_dict(agent.loss.torso.state_dict())
+    for a in (agent, plain):
+        loss, p = inner(a).loss, parts(a)
+        loss.torso_target.load_state_dict(inner(agent).loss.torso.state_dict())
+        loss.torso.load_state_dict(inner(agent).loss.torso.state_dict())
         g = torch.Generator().manual_seed(1)
-        loss.target_mean_AD.copy_(torch.randn(loss.target_mean_AD.shape, generator=g))
-        loss.head.mean_AD.copy_(loss.target_mean_AD)
+        p.target_mean_AD.copy_(torch.randn(p.target_mean_AD.shape, generator=g))
+        p.head.mean_AD.copy_(p.target_mean_AD)
     inputs = _minibatch()
-    torch.testing.assert_close(agent.loss(inputs)["loss"], plain.loss(inputs)["loss"])  # optimistic
-    for loss in (agent.loss, plain.loss):
-        loss.calibrate()
-    lowered, kept = agent.loss(inputs), plain.loss(inputs)
+    a_loss, p_loss = inner(agent).loss, inner(plain).loss
+    torch.testing.assert_close(a_loss(inputs)["loss"], p_loss(inputs)["loss"])  # optimistic
+    for a in (agent, plain):
+        parts(a).calibrate()
+    lowered, kept = a_loss(inputs), p_loss(inputs)
     t = TensorBatch.of(inputs)
-    q_BA = agent.loss.torso_target(t.obs_B) @ agent.loss.target_mean_AD.T
+    q_BA = a_loss.torso_target.net(t.obs_B) @ parts(agent).target_mean_AD.T
     greedy_B = q_BA.argmax(dim=1) == t.actions_B
-    drop_B = kept["y_post_B"] - lowered["y_post_B"]
+    drop_B = kept["y_post_B@0"] - lowered["y_post_B@0"]
     assert greedy_B.any() and (~greedy_B).any()
     torch.testing.assert_close(drop_B[greedy_B], torch.zeros(int(greedy_B.sum())))
     gap_B = q_BA.max(dim=1).values - q_BA.gather(1, t.actions_B[:, None])[:, 0]
@@ -111,6 +114,6 @@ def test_the_switch_makes_the_learner_capture_the_update_again(
     GPU)."""
     agent = make_agent(tmp_path, **{"preset": "general", "blr.target": "mean", "k_target": "k"})
     forgotten = []
-    monkeypatch.setattr(agent.learner, "forget_graphs", lambda: forgotten.append(1))
-    agent.calibrate(restart=False)
+    monkeypatch.setattr(inner(agent).learner, "forget_graphs", lambda: forgotten.append(1))
+    inner(agent).calibrate(restart=False)
     assert forgotten == [1]

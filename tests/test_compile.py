@@ -16,7 +16,7 @@ from farsighter import make_config
 from farsighter.agents.cuda_graph import check_compiler
 from farsighter.config import validate
 from farsighter.errors import ConfigError
-from tests.conftest import inner
+from tests.conftest import inner, parts
 from tests.test_cuda_graph import _agent, _params
 from tests.test_farsighter_agent import feed as _feed
 
@@ -81,7 +81,7 @@ def test_a_compiled_run_trains_checkpoints_and_resumes(tmp_path: Path) -> None:
     resumed = train(tiny("farsighter", tmp_path / "cut", compile=True, resume=True))
     assert full["global_step"] == resumed["global_step"] == 1_500
     assert resumed["final_eval_return"] == full["final_eval_return"]
-    a, b = (load_agent(tmp_path / d).agent.torso.state_dict() for d in ("full", "cut"))
+    a, b = (inner(load_agent(tmp_path / d).agent).torso.state_dict() for d in ("full", "cut"))
     for name in a:
         torch.testing.assert_close(a[name], b[name], rtol=0, atol=0)
 
@@ -112,11 +112,11 @@ def test_a_compiled_farsighter_follows_its_switch(tmp_path: Path) -> None:
             k_target="max",
         )
         _feed(agent, 300)  # its rewards are positive: the switch happens here
-        assert inner(agent).loss.calibrated
+        assert parts(agent).calibrated
         losses = []
         for step in range(1, 121):
             if step == 61:
-                agent.calibrate(on=False)  # the optimism again: the other branch
+                inner(agent).calibrate(on=False)  # the optimism again: the other branch
             m = agent.learn(step)
             if "td_loss" in m:
                 losses.append(float(m["td_loss"]))
@@ -124,8 +124,9 @@ def test_a_compiled_farsighter_follows_its_switch(tmp_path: Path) -> None:
 
     eager, eager_losses = run("eager", False)
     comp, comp_losses = run("compiled", True)
-    assert hasattr(comp.learner.step, "_torchdynamo_orig_callable") and not comp.learner.graphs
-    assert not comp.loss.calibrated and len(comp_losses) == len(eager_losses) > 40
+    learner = inner(comp).learner
+    assert hasattr(learner.step, "_torchdynamo_orig_callable") and not learner.graphs
+    assert not parts(comp).calibrated and len(comp_losses) == len(eager_losses) > 40
     np.testing.assert_allclose(comp_losses, eager_losses, rtol=1e-4, atol=1e-6)
     for a, b in zip(_params(comp), _params(eager), strict=True):
         torch.testing.assert_close(a, b, rtol=1e-4, atol=1e-5)

@@ -15,7 +15,7 @@ import farsighter
 from farsighter.config import Config
 from farsighter.envs import make_env, make_eval_envs
 from farsighter.session import EvalResult, evaluate_episodes
-from tests.conftest import GrabAgent, tiny
+from tests.conftest import GrabAgent, parts, tiny
 
 MAZE = "farsighter/BridgeMaze-v0"
 MEDIAN = -1  # eval_max_steps: the median return of the uncapped episodes
@@ -121,12 +121,12 @@ def test_batched_returns_equal_each_episode_stepped_alone(
 def test_evaluation_draws_nothing_from_the_agent(trained: dict[str, tuple[Any, Config]]) -> None:
     agent, cfg = trained[MAZE]
     cfg = dataclasses.replace(cfg, eval_epsilon=0.5)
-    before = (agent.rng.bit_generator.state, agent.gen.get_state().clone())
-    before_counters = dataclasses.asdict(agent.counters)
+    before = (parts(agent).rng.bit_generator.state, parts(agent).gen.get_state().clone())
+    before_counters = dataclasses.asdict(parts(agent).counters)
     batched(agent, cfg, 3, 5, seed=1)
-    assert agent.rng.bit_generator.state == before[0]
-    assert torch.equal(agent.gen.get_state(), before[1])
-    assert dataclasses.asdict(agent.counters) == before_counters
+    assert parts(agent).rng.bit_generator.state == before[0]
+    assert torch.equal(parts(agent).gen.get_state(), before[1])
+    assert dataclasses.asdict(parts(agent).counters) == before_counters
 
 
 def test_the_loop_evaluates_the_phase_seed_as_a_batch(tmp_path: Path) -> None:

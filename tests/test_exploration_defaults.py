@@ -7,15 +7,18 @@ from __future__ import annotations
 import dataclasses
 import math
 from pathlib import Path
+from typing import Any
 
 import gymnasium as gym
 import numpy as np
 import pytest
 import torch
 
+from farsighter.agents import build_agent
 from farsighter.agents import farsighter_loss as farsighter_module
 from farsighter.agents.common import td_loss
 from farsighter.agents.farsighter import FarsighterAgent
+from farsighter.agents.farsighter_targets import eq8_targets
 from farsighter.config import PRESETS, make_config, validate
 from farsighter.config.presets import PREVIOUS_GENERAL_FARSIGHTER
 from farsighter.envs import make_env
@@ -24,7 +27,7 @@ from farsighter.errors import ConfigError, EnvError
 from farsighter.exploration.revisit import EpisodeVisits
 from farsighter.ops.blr import BLRHead, residual_variance
 from farsighter.replay import VectorStep
-from tests.conftest import tiny
+from tests.conftest import eq8, inner, parts, tiny
 
 
 # ------------------------------------------------------------------ the scaled posterior
@@ -175,7 +178,8 @@ def test_sample_target_adds_the_rows_noise(tmp_path: Path) -> None:
     both Q's of s': with all normals zero it is the mean target; with normals it moves by the
     predictive sd of the target features (a broken scale or sign fails)."""
     agent = make_agent(tmp_path, **{"blr.target": "sample", "k": 1})
-    loss = agent.loss
+    loss, p = inner(agent).loss, parts(agent)
+    torso = inner(agent).torso.net
     obs = torch.randn(5, 4)
     t = farsighter_module.TensorBatch(
         obs_B=obs,
@@ -184,16 +188,16 @@ def test_sample_target_adds_the_rows_noise(tmp_path: Path) -> None:
         returns_B=torch.ones(5),
         bootstrap_B=torch.full((5,), 0.5),
     )
-    head = agent.head
-    zero = loss.targets(t, {"eps_BA": torch.zeros(5, 2)})
-    phi_t = loss.torso_target(t.next_obs_B)
-    q_t = phi_t @ loss.target_mean_AD.T
-    a_star = (agent.torso(t.next_obs_B) @ head.mean_AD.T).argmax(1)
+    head = p.head
+    zero = eq8(agent, t, {"eps_BA": torch.zeros(5, 2)})
+    phi_t = loss.torso_target.net(t.next_obs_B)
+    q_t = phi_t @ p.target_mean_AD.T
+    a_star = (torso(t.next_obs_B) @ head.mean_AD.T).argmax(1)
     torch.testing.assert_close(zero, 1 + 0.5 * q_t.gather(1, a_star[:, None])[:, 0])
     # normals of one: each action's Q of s' (online and target) rises by its predictive sd
     sd = head.predictive_var(phi_t).sqrt()
-    shifted = loss.targets(t, {"eps_BA": torch.ones(5, 2)})
-    a_up = (agent.torso(t.next_obs_B) @ head.mean_AD.T + sd).argmax(1)
+    shifted = eq8(agent, t, {"eps_BA": torch.ones(5, 2)})
+    a_up = (torso(t.next_obs_B) @ head.mean_AD.T + sd).argmax(1)
     torch.testing.assert_close(shifted, 1 + 0.5 * (q_t + sd).gather(1, a_up[:, None])[:, 0])
 
 
@@ -203,8 +207,8 @@ def test_target_noise_scale_multiplies_the_draw_in_the_target(tmp_path: Path, ta
     times the posterior's (normals times c give it), and at c = 0 the mean target; a factor
     applied twice, to the target Q alone or not at all fails."""
     scaled = make_agent(tmp_path / "c", **{"blr.target": target, "k": 1})
-    loss = scaled.loss
-    loss.blr = dataclasses.replace(loss.blr, target_noise_scale=0.3)
+    p = parts(scaled)  # the seed's targets, under its blr
+    p.blr = dataclasses.replace(p.blr, target_noise_scale=0.3)
     g = torch.Generator().manual_seed(5)
     n = 64
     t = farsighter_module.TensorBatch(
@@ -215,22 +219,22 @@ def test_target_noise_scale_multiplies_the_draw_in_the_target(tmp_path: Path, ta
         bootstrap_B=torch.full((n,), 0.9),
     )
     eps = torch.randn(n, 2, generator=g) * 20
-    y = loss.targets(t, {"eps_BA": eps})
-    plain = dataclasses.replace(loss.blr, target_noise_scale=1.0)
-    loss.blr, scaled_blr = plain, loss.blr
-    torch.testing.assert_close(y, loss.targets(t, {"eps_BA": 0.3 * eps}))
-    assert not torch.allclose(y, loss.targets(t, {"eps_BA": eps}))
-    loss.blr = dataclasses.replace(scaled_blr, target_noise_scale=0.0)
-    mean = farsighter_module.eq8_targets(
-        scaled.head,
-        loss.target_mean_AD,
+    y = eq8(scaled, t, {"eps_BA": eps})
+    plain = dataclasses.replace(p.blr, target_noise_scale=1.0)
+    p.blr, scaled_blr = plain, p.blr
+    torch.testing.assert_close(y, eq8(scaled, t, {"eps_BA": 0.3 * eps}))
+    assert not torch.allclose(y, eq8(scaled, t, {"eps_BA": eps}))
+    p.blr = dataclasses.replace(scaled_blr, target_noise_scale=0.0)
+    mean = eq8_targets(
+        p.head,
+        p.target_mean_AD,
         "mean",
         t,
-        scaled.torso(t.next_obs_B),
-        loss.torso_target(t.next_obs_B),
+        inner(scaled).torso.net(t.next_obs_B),
+        inner(scaled).loss.torso_target.net(t.next_obs_B),
         {},
     )
-    torch.testing.assert_close(loss.targets(t, {"eps_BA": eps}), mean)
+    torch.testing.assert_close(eq8(scaled, t, {"eps_BA": eps}), mean)
 
 
 def test_sample_greedy_target_draws_the_value_of_the_means_greedy_action(tmp_path: Path) -> None:
@@ -238,7 +242,8 @@ def test_sample_greedy_target_draws_the_value_of_the_means_greedy_action(tmp_pat
     target Q with its row's draw added; where a draw would change the argmax (sample's choice)
     the two targets differ, and over many rows the draw adds no optimism of its own."""
     agent = make_agent(tmp_path, **{"blr.target": "sample-greedy", "k": 1})
-    loss, head = agent.loss, agent.head
+    loss, head, p = inner(agent).loss, parts(agent).head, parts(agent)
+    torso = inner(agent).torso.net
     n = 400
     t = farsighter_module.TensorBatch(
         obs_B=torch.randn(n, 4),
@@ -248,16 +253,16 @@ def test_sample_greedy_target_draws_the_value_of_the_means_greedy_action(tmp_pat
         bootstrap_B=torch.full((n,), 0.5),
     )
     eps = torch.randn(n, 2, generator=torch.Generator().manual_seed(0)) * 30
-    y = loss.targets(t, {"eps_BA": eps})
-    phi_t = loss.torso_target(t.next_obs_B)
-    q_t = phi_t @ loss.target_mean_AD.T
+    y = eq8(agent, t, {"eps_BA": eps})
+    phi_t = loss.torso_target.net(t.next_obs_B)
+    q_t = phi_t @ p.target_mean_AD.T
     noise = head.predictive_var(phi_t).sqrt() * eps
-    a_mean = (agent.torso(t.next_obs_B) @ head.mean_AD.T).argmax(1)
+    a_mean = (torso(t.next_obs_B) @ head.mean_AD.T).argmax(1)
     torch.testing.assert_close(y, 1 + 0.5 * (q_t + noise).gather(1, a_mean[:, None])[:, 0])
     # the default's target: the argmax over the drawn values, a different action in some rows
-    phi_next = agent.torso(t.next_obs_B)
-    args = (head, loss.target_mean_AD, "sample", t, phi_next, phi_t, {"eps_BA": eps})
-    y_sample = farsighter_module.eq8_targets(*args)
+    phi_next = torso(t.next_obs_B)
+    args = (head, p.target_mean_AD, "sample", t, phi_next, phi_t, {"eps_BA": eps})
+    y_sample = eq8_targets(*args)
     assert (y_sample > y + 1e-6).any()
     assert y_sample.mean() > y.mean()
 
@@ -269,11 +274,11 @@ def test_centred_sample_target_takes_out_the_minibatch_mean_optimism(tmp_path: P
     the difference of their raw optimism per unit of bootstrap (a missing subtraction, a wrong
     weight or terminal rows shifted each fail)."""
     agent = make_agent(tmp_path, **{"blr.target": "sample", "blr.center_sample": True, "k": 1})
-    raw_loss = make_agent(tmp_path, **{"blr.target": "sample", "k": 1}).loss
-    loss = agent.loss
+    raw = make_agent(tmp_path, **{"blr.target": "sample", "k": 1})
+    raw_loss, loss = inner(raw).loss, inner(agent).loss
     raw_loss.torso.load_state_dict(loss.torso.state_dict())
     raw_loss.torso_target.load_state_dict(loss.torso_target.state_dict())
-    raw_loss.target_mean_AD.copy_(loss.target_mean_AD)
+    parts(raw).target_mean_AD.copy_(parts(agent).target_mean_AD)
     g = torch.Generator().manual_seed(3)
     bootstrap = torch.tensor([0.99, 0.5, 0.0, 0.99, 0.25, 0.0])
     t = farsighter_module.TensorBatch(
@@ -284,9 +289,9 @@ def test_centred_sample_target_takes_out_the_minibatch_mean_optimism(tmp_path: P
         bootstrap_B=bootstrap,
     )
     eps = torch.randn(6, 2, generator=g).abs() + 0.5  # every draw optimistic: a mean above 0
-    y = loss.targets(t, {"eps_BA": eps})
-    y_raw = raw_loss.targets(t, {"eps_BA": eps})
-    y_mean = raw_loss.targets(t, {"eps_BA": torch.zeros(6, 2)})
+    y = eq8(agent, t, {"eps_BA": eps})
+    y_raw = eq8(raw, t, {"eps_BA": eps})
+    y_mean = eq8(raw, t, {"eps_BA": torch.zeros(6, 2)})
     assert float((y_raw - y_mean).sum()) > 0.01  # the raw draw is a bonus ...
     assert abs(float((y - y_mean).sum())) < 1e-5  # ... the centred one sums to none
     ends = bootstrap == 0
@@ -295,21 +300,22 @@ def test_centred_sample_target_takes_out_the_minibatch_mean_optimism(tmp_path: P
     torch.testing.assert_close(per_unit, per_unit[:1].expand_as(per_unit))  # one shift for all
     # and the update trains on it: the loss of the minibatch is Eq. 8's error against y
     inputs = {**{f: getattr(t, f) for f in ("obs_B", "next_obs_B", "actions_B")}}
-    inputs |= {"returns_B": t.returns_B, "bootstrap_B": t.bootstrap_B, "eps_BA": eps}
-    q = (loss.torso(t.obs_B) @ agent.head.mean_AD.T)[:, 0]
-    torch.testing.assert_close(loss(inputs)["loss"], td_loss(q, y, agent.cfg.loss))
+    inputs |= {"returns_B": t.returns_B, "bootstrap_B": t.bootstrap_B, "eps_BA@0": eps}
+    q = (loss.torso.net(t.obs_B) @ parts(agent).head.mean_AD.T)[:, 0]
+    torch.testing.assert_close(loss(inputs)["loss"], td_loss(q, y, inner(agent).cfg.loss))
 
 
 # ------------------------------------------------------------------ the agent
-def make_agent(tmp_path: Path, algo: str = "farsighter", **kw: object) -> FarsighterAgent:
+def make_agent(tmp_path: Path, algo: str = "farsighter", **kw: object) -> Any:
+    """One seed alone, as a LearningAgent (a ``Sole``; its parts: ``inner``, ``parts``)."""
     cfg = tiny(algo, tmp_path, **{"learning_starts": 0, **kw})
     env = gym.make("CartPole-v1")
-    return FarsighterAgent(
+    return build_agent(
         cfg, env.observation_space, env.action_space, frame_stack=1, device=torch.device("cpu")
     )
 
 
-def _act_and_end(agent: FarsighterAgent, steps: int, episode_ends: set[int]) -> list[int]:
+def _act_and_end(agent: Any, steps: int, episode_ends: set[int]) -> list[int]:
     """Act ``steps`` times; the episode ends after the steps in ``episode_ends``. Returns the
     draw counter after each step."""
     obs = np.zeros((1, 4), np.float32)
@@ -321,7 +327,7 @@ def _act_and_end(agent: FarsighterAgent, steps: int, episode_ends: set[int]) -> 
         agent.observe(
             VectorStep(obs, action, np.zeros(1), np.array([end]), np.array([False]), final)
         )
-        draws.append(agent.counters.draws)
+        draws.append(parts(agent).counters.draws)
     return draws
 
 
@@ -349,16 +355,17 @@ def test_the_default_draw_is_held_for_k_steps_across_episode_ends(tmp_path: Path
     draw acts for k steps, whatever the episodes do, and the held weights are the ones acted
     under (a draw per step would dither: docs/design.md "When to draw")."""
     agent = make_agent(tmp_path, k=4, preset="auto")
-    assert agent.cfg.preset == "general" and agent.cfg.blr.redraw == "k"
+    assert inner(agent).cfg.preset == "general" and inner(agent).cfg.blr.redraw == "k"
     draws = _act_and_end(agent, 20, episode_ends={3, 11})
     drawn_at = [t for t in range(20) if draws[t] > (draws[t - 1] if t else 0)]
     assert drawn_at == [0, 4, 8, 12, 16]
     obs = np.random.default_rng(0).normal(size=(1, 4)).astype(np.float32)
-    phi = agent.torso(torch.as_tensor(obs))
-    agent.exploration.q(phi, obs, agent.gen)  # step 20: a new hold begins
-    held = agent.exploration.w_EAD.clone()
-    q = agent.exploration.q(phi, obs, agent.gen)  # step 21, under the same draw
-    assert torch.equal(agent.exploration.w_EAD, held)
+    phi = inner(agent).torso.net(torch.as_tensor(obs))
+    p = parts(agent)
+    p.exploration.q(phi, obs, p.gen)  # step 20: a new hold begins
+    held = p.exploration.w_EAD.clone()
+    q = p.exploration.q(phi, obs, p.gen)  # step 21, under the same draw
+    assert torch.equal(p.exploration.w_EAD, held)
     assert torch.allclose(q, phi @ held[0].T)
 
 
@@ -383,7 +390,7 @@ def test_revisit_holds_the_draw_until_the_episode_returns_to_a_state(tmp_path: P
                 [obs[0]] if end else None,
             )
         )
-        draws.append(agent.counters.draws)
+        draws.append(parts(agent).counters.draws)
     drawn_at = [t for t in range(len(draws)) if draws[t] > (draws[t - 1] if t else 0)]
     assert drawn_at == [0, 3, 6, 8]
 
@@ -422,28 +429,28 @@ def test_incremental_posterior_refreshes_every_M_steps(tmp_path: Path) -> None:
             )
         )
         agent.learn(step)
-    assert agent.head.num_refreshes == 10  # steps 100, 200, ..., 1000
-    assert agent.counters.refreshes == 10
+    assert parts(agent).head.num_refreshes == 10  # steps 100, 200, ..., 1000
+    assert parts(agent).counters.refreshes == 10
 
 
 def test_sample_target_adds_the_posterior_spread(tmp_path: Path) -> None:
     agent = make_agent(tmp_path, blr__target="sample", blr__prior_std=5.0, k=1)
     mean_agent = make_agent(tmp_path, blr__target="mean", blr__prior_std=5.0, k=1)
-    mean_agent.torso.load_state_dict(agent.torso.state_dict())
-    mean_agent.loss.torso_target.load_state_dict(agent.loss.torso_target.state_dict())
+    inner(mean_agent).torso.load_state_dict(inner(agent).torso.state_dict())
+    inner(mean_agent).loss.torso_target.load_state_dict(inner(agent).loss.torso_target.state_dict())
     from farsighter.agents.common import TensorBatch
 
     n = 4_000
     obs = torch.zeros(n, 4) + 0.5
     t = TensorBatch(obs, obs, torch.zeros(n, dtype=torch.int64), torch.zeros(n), torch.ones(n))
-    y_sample = agent.loss.targets(t, agent._draws(n))
-    y_mean = mean_agent.loss.targets(t, mean_agent._draws(n))
+    y_sample = eq8(agent, t, parts(agent).draws(n, False))
+    y_mean = eq8(mean_agent, t, parts(mean_agent).draws(n, False))
     assert torch.allclose(y_mean, y_mean[:1].expand(n))  # no randomness under the mean
     assert y_sample.std() > 0.5  # one draw per row
     assert y_sample.mean() > y_mean[0]  # the max over noisy values is optimistic
 
 
-def _feed(agent: FarsighterAgent) -> None:
+def _feed(agent: Any) -> None:
     """300 random transitions, an episode end every 25."""
     feed_rng = np.random.default_rng(3)
     for t in range(300):
@@ -467,7 +474,8 @@ def test_k_target_max_is_the_larger_of_the_k_and_one_step_targets(
     agent = make_agent(tmp_path, k=4, k_target="max")
     _feed(agent)
     captured: dict[str, list[torch.Tensor]] = {"ys": [], "trained": []}
-    original = agent.loss.targets
+    p = parts(agent)
+    original = p.y
 
     def spy(t, *args):  # record every target computed during one update
         y = original(t, *args)
@@ -478,9 +486,9 @@ def test_k_target_max_is_the_larger_of_the_k_and_one_step_targets(
         captured["trained"].append(y.detach().clone())
         return td_loss(q, y, kind)
 
-    agent.loss.targets = spy  # type: ignore[method-assign]
+    p.y = spy  # type: ignore[method-assign]
     monkeypatch.setattr(farsighter_module, "td_loss", loss_spy)
-    agent.update()
+    inner(agent).update()
     y_k, y_1 = captured["ys"]
     (trained,) = captured["trained"]
     # the second call is the one-step target of the same starts; the loss saw their elementwise
@@ -494,24 +502,27 @@ def test_k_target_max_mean_lets_the_posterior_mean_choose_and_keeps_the_draw(
     tmp_path: Path, monkeypatch: pytest.MonkeyPatch
 ) -> None:
     agent = make_agent(tmp_path, k=4, k_target="max-mean", **{"blr.target": "sample"})
-    assert agent.cfg.blr.target == "sample"  # the targets carry a draw
+    assert inner(agent).cfg.blr.target == "sample"  # the targets carry a draw
     _feed(agent)
-    captured: dict[str, list[torch.Tensor]] = {"pairs": [], "trained": []}
-    original = agent.loss.target_and_mean
+    captured: dict[str, list[torch.Tensor]] = {"drawn": [], "mean": [], "trained": []}
+    p = parts(agent)
+    original = p.y
 
-    def spy(t, *args):  # every (drawn, mean) target pair of one update
-        pair = original(t, *args)
-        captured["pairs"].append(pair)
-        return pair
+    def spy(t, nxt, draws, kind=None):  # every drawn and every mean target of one update
+        y = original(t, nxt, draws, kind)
+        captured["drawn" if kind is None else kind].append(y)
+        return y
 
     def loss_spy(q, y, kind):
         captured["trained"].append(y.detach().clone())
         return td_loss(q, y, kind)
 
-    agent.loss.target_and_mean = spy  # type: ignore[method-assign]
+    p.y = spy  # type: ignore[method-assign]
     monkeypatch.setattr(farsighter_module, "td_loss", loss_spy)
-    agent.update()
-    (y_k, mean_k), (y_1, mean_1) = captured["pairs"]
+    inner(agent).update()
+    # the k-step windows' targets first, then the one-step windows' of the same starts
+    y_k, y_1 = captured["drawn"]
+    mean_k, mean_1 = captured["mean"]
     (trained,) = captured["trained"]
     assert mean_k is not None and mean_1 is not None
     one_wins = mean_1 > mean_k
@@ -523,7 +534,7 @@ def test_k_target_max_mean_lets_the_posterior_mean_choose_and_keeps_the_draw(
     assert not torch.equal(trained, torch.maximum(y_k, y_1))
 
 
-def _sampled_rows(preset: str, tmp_path: Path) -> tuple[np.ndarray, int, FarsighterAgent]:
+def _sampled_rows(preset: str, tmp_path: Path) -> tuple[np.ndarray, int, Any]:
     """The replay rows of 20 updates of Farsighter on a 20-state chain under ``preset``, after
     3,000 stored transitions; also the rows stored and the agent."""
     cfg = make_config(
@@ -535,7 +546,7 @@ def _sampled_rows(preset: str, tmp_path: Path) -> tuple[np.ndarray, int, Farsigh
         progress=False,
     )
     env = make_env(cfg, seed=0)
-    agent = FarsighterAgent(
+    agent = build_agent(
         cfg, env.observation_space, env.action_space, frame_stack=1, device=torch.device("cpu")
     )
     rng = np.random.default_rng(0)
@@ -556,16 +567,17 @@ def _sampled_rows(preset: str, tmp_path: Path) -> tuple[np.ndarray, int, Farsigh
         )
         obs = env.reset()[0] if end else nxt
     rows = []
-    sample = agent.replay.sample
+    replay = inner(agent).replay
+    sample = replay.sample
 
     def spy(*args, **kw):  # the minibatch each update trains on
         batch = sample(*args, **kw)
         rows.append(batch.index)
         return batch
 
-    agent.replay.sample = spy  # type: ignore[method-assign]
+    replay.sample = spy  # type: ignore[method-assign]
     for _ in range(20):
-        agent.update()
+        inner(agent).update()
     return np.concatenate(rows), 3_000, agent
 
 
@@ -573,10 +585,10 @@ def test_the_general_learner_trains_on_the_whole_replay_with_adam(tmp_path: Path
     """The default (general) learner draws its minibatches from the whole replay, where Table
     1's (control) draws them from the latest N = 1,000 transitions (Algorithm 1 line 4)."""
     rows, stored, agent = _sampled_rows("general", tmp_path)
-    assert isinstance(agent.learner.opt, torch.optim.Adam) and len(rows) == 20 * 64
+    assert isinstance(inner(agent).learner.opt, torch.optim.Adam) and len(rows) == 20 * 64
     assert rows.min() < stored - 1_000 - 500  # reaches well behind any latest-N window
     rows, stored, agent = _sampled_rows("control", tmp_path)
-    assert isinstance(agent.learner.opt, torch.optim.RMSprop) and len(rows) == 20 * 32
+    assert isinstance(inner(agent).learner.opt, torch.optim.RMSprop) and len(rows) == 20 * 32
     assert rows.min() >= stored - 1_000
 
 
@@ -731,7 +743,7 @@ UNTIL_REWARD_CUT = {
 """The default's targets until the first reward, then the mean's cut target (k = 3)."""
 
 
-def _paid_step(agent: FarsighterAgent, obs: np.ndarray, reward: float, done: bool = False) -> None:
+def _paid_step(agent: Any, obs: np.ndarray, reward: float, done: bool = False) -> None:
     """One acted step of one stream at ``obs`` that pays ``reward`` (and ends its episode)."""
     final = [obs[0]] if done else None
     action = agent.act(obs, 10)
@@ -757,15 +769,16 @@ def test_optimism_until_reward_switches_to_calibrated_targets_at_the_first_rewar
             VectorStep(obs, action, np.array([reward]), np.array([False]), np.array([False]), None)
         )
 
+    p = parts(agent)
     for reward in (0.0, -1.0, 0.0):
         step(reward)
-    assert not agent.loss.calibrated
-    assert (agent.loss.blr.target, agent.loss.k_target) == ("sample", "max")
-    assert agent._draws(4, True).keys() == {"eps_BA", "one_eps_BA"}
+    assert not p.calibrated
+    assert (p.blr.target, p.k_target) == ("sample", "max")
+    assert p.draws(4, True).keys() == {"eps_BA", "one_eps_BA"}
     step(0.5)
-    assert agent.loss.calibrated
-    assert (agent.loss.blr.target, agent.loss.k_target) == ("mean", "k")
-    assert agent._draws(4, True) == {}  # the mean target draws nothing
+    assert p.calibrated
+    assert (p.blr.target, p.k_target) == ("mean", "k")
+    assert p.draws(4, True) == {}  # the mean target draws nothing
     # the target the update trains on: the k-step mean target, one-step inputs ignored
     n = 8
     g = torch.Generator().manual_seed(2)
@@ -780,31 +793,32 @@ def test_optimism_until_reward_switches_to_calibrated_targets_at_the_first_rewar
         "one_bootstrap_B": torch.full((n,), 0.9),
     }
     t = farsighter_module.TensorBatch.of(inputs)
-    mean_k = farsighter_module.eq8_targets(
-        agent.head,
-        agent.loss.target_mean_AD,
+    torso, loss = inner(agent).torso.net, inner(agent).loss
+    mean_k = eq8_targets(
+        p.head,
+        p.target_mean_AD,
         "mean",
         t,
-        agent.torso(t.next_obs_B),
-        agent.loss.torso_target(t.next_obs_B),
+        torso(t.next_obs_B),
+        loss.torso_target.net(t.next_obs_B),
         {},
     )
     expected = td_loss(
-        farsighter_module.q_taken(agent.torso(t.obs_B), agent.head.mean_AD, t.actions_B),
+        farsighter_module.q_taken(torso(t.obs_B), p.head.mean_AD, t.actions_B),
         mean_k,
-        agent.cfg.loss,
+        inner(agent).cfg.loss,
     )
-    torch.testing.assert_close(agent.loss(inputs)["loss"], expected)
+    torch.testing.assert_close(loss(inputs)["loss"], expected)
     # a checkpoint carries the switch
     again = make_agent(tmp_path / "b", **values)
-    assert not again.loss.calibrated
+    assert not parts(again).calibrated
     again.load_state_dict(agent.state_dict())
-    assert again.loss.calibrated and again.loss.k_target == "k"
+    assert parts(again).calibrated and parts(again).k_target == "k"
     # the default never switches
     plain = make_agent(tmp_path / "c", **{**values, "blr.optimism": "always"})
     for reward in (1.0, 2.0):
         _paid_step(plain, obs, reward)
-    assert not plain.loss.calibrated and plain.loss.k_target == "max"
+    assert not parts(plain).calibrated and parts(plain).k_target == "max"
 
 
 def test_rearm_takes_up_the_optimism_again_after_unpaid_episodes(tmp_path: Path) -> None:
@@ -818,52 +832,49 @@ def test_rearm_takes_up_the_optimism_again_after_unpaid_episodes(tmp_path: Path)
     agent = make_agent(tmp_path / "a", **values)
     obs = np.zeros((1, 4), np.float32)
 
-    def step(a: FarsighterAgent, reward: float, done: bool) -> None:
+    def step(a: Any, reward: float, done: bool) -> None:
         _paid_step(a, obs, reward, done)
 
-    def optimistic(a: FarsighterAgent) -> bool:
-        targets = (a.loss.blr.target, a.loss.k_target, a.replay.cut_exploratory)
-        if a.loss.calibrated:
+    def optimistic(a: Any) -> bool:
+        p = parts(a)
+        targets = (p.blr.target, p.k_target, inner(a).replay.cut_exploratory)
+        if p.calibrated:
             assert targets == ("mean", "cut", True)
         else:
             assert targets == ("sample", "max", False)
-            assert a._draws(4, True).keys() == {"eps_BA", "one_eps_BA"}
-        return not a.loss.calibrated
+            assert p.draws(4, True).keys() == {"eps_BA", "one_eps_BA"}
+        return not p.calibrated
 
     step(agent, 0.0, True)
     step(agent, 0.0, True)  # unpaid episodes before the switch change nothing
     assert optimistic(agent)
     step(agent, 1.0, False)
-    assert not optimistic(agent) and agent.unpaid == 0
+    assert not optimistic(agent) and parts(agent).unpaid == 0
     step(agent, 0.0, True)  # the paid episode ends: it counts as paid (the reward started it)
-    assert not optimistic(agent) and agent.unpaid == 1
+    assert not optimistic(agent) and parts(agent).unpaid == 1
     again = make_agent(tmp_path / "b", **values)
     again.load_state_dict(agent.state_dict())
-    assert not optimistic(again) and again.unpaid == 1
+    assert not optimistic(again) and parts(again).unpaid == 1
     step(again, 0.0, False)
     step(again, 0.5, False)  # a reward mid-episode: the count starts again
     step(again, 0.0, True)
-    assert not optimistic(again) and again.unpaid == 1
+    assert not optimistic(again) and parts(again).unpaid == 1
     step(again, 0.0, True)
-    assert optimistic(again) and again.unpaid == 2  # rearmed
+    assert optimistic(again) and parts(again).unpaid == 2  # rearmed
     step(again, 0.0, True)
     assert optimistic(again)
     step(again, 0.2, False)
     assert not optimistic(again)  # switched once more
     # the count over streams: a reward on any stream is pay; each stream's episode end counts
-    cfg = again.cfg
+    cfg = inner(again).cfg
     assert switch_at(cfg, True, 0, np.array([0.0, 1.0]), np.array([True, True])) == (None, 0)
     assert switch_at(cfg, True, 1, np.zeros(3), np.array([True, False, True])) == (False, 3)
     assert switch_at(cfg, True, 0, np.zeros(3), np.zeros(3, bool)) == (None, 0)
     # a seed of a batch carries its own count and state in its checkpoint
-    from farsighter.agents.farsighter_seeds import SeedBatchFarsighter
-
     env = gym.make("CartPole-v1")
     cfgs = [dataclasses.replace(cfg, seed=s) for s in (1, 2)]
     batches = [
-        SeedBatchFarsighter(
-            cfgs, env.observation_space, env.action_space, device=torch.device("cpu")
-        )
+        FarsighterAgent(cfgs, env.observation_space, env.action_space, device=torch.device("cpu"))
         for _ in range(2)
     ]
     batches[0].calibrate(1)
@@ -885,8 +896,6 @@ def test_stay_optimism_false_takes_no_draw_where_the_window_ends_where_it_began(
     """blr.stay_optimism False: a target whose s' is its s_t takes the posterior mean's value
     (no draw), every other row the sampled target with the same normals; alone and in a seed
     batch's parts."""
-    from farsighter.agents.farsighter_seeds import SeedBatchFarsighter
-
     values = {"blr.target": "sample", "k_target": "k", "blr.stay_optimism": False}
     agent = make_agent(tmp_path / "a", **values)
     g = torch.Generator().manual_seed(5)
@@ -895,25 +904,28 @@ def test_stay_optimism_false_takes_no_draw_where_the_window_ends_where_it_began(
     t = farsighter_module.TensorBatch(
         obs, next_obs, torch.zeros(8, dtype=torch.long), torch.ones(8), torch.full((8,), 0.5)
     )
-    draws = agent._draws(8, False)
+    draws = parts(agent).draws(8, False)
 
     def y_of(head: BLRHead, target_mean: torch.Tensor, kind: str, phi: torch.Tensor, d: dict):
-        return farsighter_module.eq8_targets(head, target_mean, kind, t, phi, phi, d)
+        return eq8_targets(head, target_mean, kind, t, phi, phi, d)
 
-    phi = agent.loss.torso_target(next_obs)
-    agent.torso.load_state_dict(agent.loss.torso_target.state_dict())  # one phi for both Q's
-    y = agent.loss.targets(t, draws)
-    mean = y_of(agent.head, agent.loss.target_mean_AD, "mean", phi, {})
-    sample = y_of(agent.head, agent.loss.target_mean_AD, "sample", phi, draws)
+    loss, p = inner(agent).loss, parts(agent)
+    phi = loss.torso_target.net(next_obs)
+    loss.torso.load_state_dict(loss.torso_target.state_dict())  # one phi for both Q's
+    y = eq8(agent, t, draws)
+    mean = y_of(p.head, p.target_mean_AD, "mean", phi, {})
+    sample = y_of(p.head, p.target_mean_AD, "sample", phi, draws)
     assert torch.equal(y[:4], mean[:4]) and torch.equal(y[4:], sample[4:])
     assert (sample[:4] != mean[:4]).all()  # the draw would have moved them
-    # a seed of a batch: its parts' targets
+    # a seed of a batch (of two seeds): its parts' targets
     env = gym.make("CartPole-v1")
-    batch = SeedBatchFarsighter(
-        [agent.cfg], env.observation_space, env.action_space, device=torch.device("cpu")
+    cfg = inner(agent).cfg
+    cfgs = [cfg, dataclasses.replace(cfg, seed=cfg.seed + 1)]
+    batch = FarsighterAgent(
+        cfgs, env.observation_space, env.action_space, device=torch.device("cpu")
     )
     p = batch.parts[0]
-    y = p.y(t, phi, phi, draws)
+    y = p.y(t, (phi, phi), draws)
     mean = y_of(p.head, p.target_mean_AD, "mean", phi, {})
     sample = y_of(p.head, p.target_mean_AD, "sample", phi, draws)
     assert torch.equal(y[:4], mean[:4]) and torch.equal(y[4:], sample[4:])
@@ -964,31 +976,32 @@ def test_cut_records_where_the_draw_chose_otherwise_than_the_mean(tmp_path: Path
     posterior mean's greedy action (every uniform action before learning_starts), and cuts its
     windows there; evaluation actions record nothing. A seed batch takes it (its runs are
     those alone: tests/test_seeds.py)."""
-    from farsighter.agents.farsighter_seeds import supports
+    from farsighter.agents.farsighter import supports
     from farsighter.replay.buffer import EXPLORATORY
 
     agent = make_agent(
         tmp_path / "a", **{"k_target": "cut", "k": 3, "learning_starts": 5, "blr.redraw": "step"}
     )
-    assert agent.replay.cut_exploratory
+    replay, head = inner(agent).replay, parts(agent).head
+    assert replay.cut_exploratory
     # a posterior wide enough that draws often disagree with the mean
-    agent.head.mean_AD.normal_(std=1e-3, generator=torch.Generator().manual_seed(0))
+    head.mean_AD.normal_(std=1e-3, generator=torch.Generator().manual_seed(0))
     rng = np.random.default_rng(0)
     expected = []
     for t in range(60):
         obs = rng.normal(size=(1, 4)).astype(np.float32)
         action = agent.act(obs, t)
         with torch.no_grad():
-            greedy = int((agent.torso(torch.from_numpy(obs)) @ agent.head.mean_AD.T).argmax())
+            greedy = int((inner(agent).torso.net(torch.from_numpy(obs)) @ head.mean_AD.T).argmax())
         expected.append(t < 5 or int(action[0]) != greedy)
         agent.act(obs, t, explore=False)  # an evaluation between steps changes nothing
         agent.observe(
             VectorStep(obs, action, np.zeros(1), np.array([False]), np.array([False]), None)
         )
-    flagged = ((agent.replay.flags[0, :60] & EXPLORATORY) != 0).tolist()
+    flagged = ((replay.flags[0, :60] & EXPLORATORY) != 0).tolist()
     assert flagged == expected
     assert 5 < sum(expected[5:]) < 50  # both kinds occur after learning starts
-    assert supports(agent.cfg, gym.spaces.Box(-1, 1, (4,)), torch.device("cpu")) == ""
+    assert supports(inner(agent).cfg, gym.spaces.Box(-1, 1, (4,)), torch.device("cpu")) == ""
 
 
 def test_until_reward_then_cut_switches_the_replay_to_cut_windows(tmp_path: Path) -> None:
@@ -997,7 +1010,8 @@ def test_until_reward_then_cut_switches_the_replay_to_cut_windows(tmp_path: Path
     becomes the mean's cut target and the replay cuts its windows, which a reload keeps."""
     values = dict(UNTIL_REWARD_CUT)
     agent = make_agent(tmp_path / "a", **values)
-    assert agent.cut and not agent.replay.cut_exploratory
+    p, replay = parts(agent), inner(agent).replay
+    assert inner(agent).cut and not replay.cut_exploratory
     obs = np.zeros((1, 4), np.float32)
     for reward in (0.0, -1.0, 1.0):
         action = agent.act(obs, 10)
@@ -1005,15 +1019,15 @@ def test_until_reward_then_cut_switches_the_replay_to_cut_windows(tmp_path: Path
             VectorStep(obs, action, np.array([reward]), np.array([False]), np.array([False]), None)
         )
         if reward <= 0:
-            assert agent.loss.k_target == "max" and not agent.replay.cut_exploratory
-    assert (agent.loss.blr.target, agent.loss.k_target) == ("mean", "cut")
-    assert agent.replay.cut_exploratory
+            assert p.k_target == "max" and not replay.cut_exploratory
+    assert (p.blr.target, p.k_target) == ("mean", "cut")
+    assert replay.cut_exploratory
     again = make_agent(tmp_path / "b", **values)
     again.load_state_dict(agent.state_dict())
-    assert again.loss.k_target == "cut" and again.replay.cut_exploratory
+    assert parts(again).k_target == "cut" and inner(again).replay.cut_exploratory
     # the plain switch neither records nor cuts
     plain = make_agent(tmp_path / "c", **{**values, "blr.calibrated_k_target": "k"})
-    assert not plain.cut and not plain.replay.cut_exploratory
+    assert not inner(plain).cut and not inner(plain).replay.cut_exploratory
 
 
 def test_until_reward_then_cut_is_the_default_run_until_the_first_reward(tmp_path: Path) -> None:
@@ -1042,14 +1056,15 @@ def test_cut_margin_flags_only_actions_the_posterior_is_sure_are_worse(tmp_path:
     every action's predictive variance, another code path); m = 0 flags every difference."""
     from farsighter.exploration.optimism import cut_relative, exploratory_actions
 
-    agent = make_agent(tmp_path / "a", **{"k_target": "cut", "k": 3})
+    agent = inner(make_agent(tmp_path / "a", **{"k_target": "cut", "k": 3}))
+    head = agent.parts[0].head
     g = torch.Generator().manual_seed(1)
-    agent.head.mean_AD.normal_(std=0.5, generator=g)
-    phi = torch.randn(400, agent.head.dim, generator=g)
+    head.mean_AD.normal_(std=0.5, generator=g)
+    phi = torch.randn(400, head.dim, generator=g)
     actions = torch.randint(0, agent.num_actions, (400,), generator=g)
-    q = phi @ agent.head.mean_AD.T
+    q = phi @ head.mean_AD.T
     greedy = q.argmax(dim=1)
-    var = agent.head.predictive_var(phi)
+    var = head.predictive_var(phi)
     rows = torch.arange(400)
     gap = q[rows, greedy] - q[rows, actions]
     sd = (var[rows, greedy] + var[rows, actions]).sqrt()
@@ -1057,9 +1072,9 @@ def test_cut_margin_flags_only_actions_the_posterior_is_sure_are_worse(tmp_path:
         expected = ((actions != greedy) & (gap > margin * sd)).numpy()
         if margin == 0:
             expected = (actions != greedy).numpy()
-        got = exploratory_actions(agent.head, phi, actions, margin)
+        got = exploratory_actions(head, phi, actions, margin)
         assert np.array_equal(got, expected), margin
-    counts = [exploratory_actions(agent.head, phi, actions, m).sum() for m in (0.0, 1.0, 3.0)]
+    counts = [exploratory_actions(head, phi, actions, m).sum() for m in (0.0, 1.0, 3.0)]
     assert counts[0] > counts[1] > counts[2] > 0, counts  # the margin bites at each step
     # blr.cut_delay: the gap against d (1 - gamma) |Q_greedy|, alone and with a margin
     best = q[rows, greedy]
@@ -1068,10 +1083,10 @@ def test_cut_margin_flags_only_actions_the_posterior_is_sure_are_worse(tmp_path:
         expected = (actions != greedy) & (gap > rel * best.abs())
         if margin:
             expected &= gap > margin * sd
-        got = exploratory_actions(agent.head, phi, actions, margin, rel)
+        got = exploratory_actions(head, phi, actions, margin, rel)
         assert np.array_equal(got, expected.numpy()), (delay, margin)
     by_delay = [
-        exploratory_actions(agent.head, phi, actions, 0.0, d * (1 - agent.cfg.gamma)).sum()
+        exploratory_actions(head, phi, actions, 0.0, d * (1 - agent.cfg.gamma)).sum()
         for d in (0.0, 20.0, 100.0)
     ]
     assert by_delay[0] > by_delay[1] > by_delay[2] > 0, by_delay  # the delay bites at each step
@@ -1098,7 +1113,7 @@ def test_switch_restart_zeroes_the_statistics_at_the_switch_only(tmp_path: Path)
     }
     obs = np.random.default_rng(0).normal(size=(1, 4)).astype(np.float32)
 
-    def step(agent: FarsighterAgent, reward: float, t: int) -> None:
+    def step(agent: Any, reward: float, t: int) -> None:
         action = agent.act(obs, t)
         agent.observe(
             VectorStep(obs, action, np.array([reward]), np.array([False]), np.array([False]), None)
@@ -1106,38 +1121,40 @@ def test_switch_restart_zeroes_the_statistics_at_the_switch_only(tmp_path: Path)
 
     agent = make_agent(tmp_path / "a", **values)
     kept = make_agent(tmp_path / "b", **{**values, "blr.switch_restart": "none"})
+    p = parts(agent)
     for a in (agent, kept):
         for t in range(12):
             step(a, -8.0 * (t % 2), t)  # residuals that move sigma_eps off its floor
-            a.update()
-        a.refresh_posterior()
-        assert float(a.head.count_A.sum()) > 0 and float(a.head.phiy_AD.abs().sum()) > 0
-        assert a.head.noise_std > 1.0 and a.loss.target_mean_AD.any()
+            inner(a).update()
+        inner(a).refresh_posterior()
+        head = parts(a).head
+        assert float(head.count_A.sum()) > 0 and float(head.phiy_AD.abs().sum()) > 0
+        assert head.noise_std > 1.0 and parts(a).target_mean_AD.any()
         step(a, 1.0, 12)
-        assert a.loss.calibrated
-    assert float(agent.head.count_A.sum()) == 0 and float(agent.head.phiy_AD.abs().sum()) == 0
-    assert float(agent.head.phiphiT_ADD.abs().sum()) == 0
+        assert parts(a).calibrated
+    assert float(p.head.count_A.sum()) == 0 and float(p.head.phiy_AD.abs().sum()) == 0
+    assert float(p.head.phiphiT_ADD.abs().sum()) == 0
     # the prior: mean 0 (in the targets too), the configured widths
-    assert not agent.head.mean_AD.any() and not agent.loss.target_mean_AD.any()
-    assert (agent.head.noise_std, agent.head.prior_std) == (1.0, 0.5)
+    assert not p.head.mean_AD.any() and not p.target_mean_AD.any()
+    assert (p.head.noise_std, p.head.prior_std) == (1.0, 0.5)
     torch.testing.assert_close(
-        agent.head.cov_ADD,
-        0.25 * torch.eye(agent.head.dim, dtype=torch.float64).expand_as(agent.head.cov_ADD),
+        p.head.cov_ADD,
+        0.25 * torch.eye(p.head.dim, dtype=torch.float64).expand_as(p.head.cov_ADD),
     )
-    assert float(kept.head.count_A.sum()) > 0 and kept.loss.target_mean_AD.any()
+    assert float(parts(kept).head.count_A.sum()) > 0 and parts(kept).target_mean_AD.any()
     for t in range(13, 16):
         step(agent, 0.0, t)
-        assert agent.update() is not None
-    agent.refresh_posterior()
+        assert inner(agent).update() is not None
+    inner(agent).refresh_posterior()
     # the refit: the statistics of the steps since the switch alone, with the prior's width
     # wherever they did not reach
-    assert float(agent.head.count_A.sum()) > 0
-    saved = {k: v.clone() for k, v in agent.head.state_dict().items() if torch.is_tensor(v)}
+    assert float(p.head.count_A.sum()) > 0
+    saved = {k: v.clone() for k, v in p.head.state_dict().items() if torch.is_tensor(v)}
     again = make_agent(tmp_path / "c", **values)
     again.load_state_dict(agent.state_dict())
-    assert again.loss.calibrated
+    assert parts(again).calibrated
     for key, value in saved.items():
-        torch.testing.assert_close(again.head.state_dict()[key], value, msg=key)
+        torch.testing.assert_close(parts(again).head.state_dict()[key], value, msg=key)
 
 
 def test_switch_restart_zero_targets_keeps_the_rows_and_drops_their_targets(
@@ -1157,25 +1174,29 @@ def test_switch_restart_zero_targets_keeps_the_rows_and_drops_their_targets(
     }
     obs = np.random.default_rng(1).normal(size=(1, 4)).astype(np.float32)
     agent = make_agent(tmp_path / "a", **values)
+    p = parts(agent)
     for t in range(13):
         action = agent.act(obs, t)
         reward = 1.0 if t == 12 else -2.0 * (t % 2)
         if t == 12:
-            rows = agent.head.phiphiT_ADD.clone()
-            agent.refresh_posterior()
-            cov, noise = agent.head.cov_ADD.clone(), agent.head.noise_std
-            assert agent.head.mean_AD.any()
+            rows = p.head.phiphiT_ADD.clone()
+            inner(agent).refresh_posterior()
+            cov, noise = p.head.cov_ADD.clone(), p.head.noise_std
+            assert p.head.mean_AD.any()
         agent.observe(
             VectorStep(obs, action, np.array([reward]), np.array([False]), np.array([False]), None)
         )
         if t < 12:
-            agent.update()
-    assert agent.loss.calibrated
-    assert not agent.head.phiy_AD.any() and not agent.head.yy_A.any()
-    torch.testing.assert_close(agent.head.phiphiT_ADD, rows)
-    assert not agent.head.mean_AD.any() and not agent.loss.target_mean_AD.any()
+            inner(agent).update()
+    assert p.calibrated
+    assert not p.head.phiy_AD.any() and not p.head.yy_A.any()
+    torch.testing.assert_close(p.head.phiphiT_ADD, rows)
+    assert not p.head.mean_AD.any() and not p.target_mean_AD.any()
     # the width the rows made (Cov = sigma_eps^2 (rows + I / ratio^2)^-1; the residual scale of
     # the zero targets moves sigma_eps alone)
     torch.testing.assert_close(
-        agent.head.cov_ADD / agent.head.noise_std**2, cov / noise**2, rtol=1e-6, atol=1e-9
+        p.head.cov_ADD / p.head.noise_std**2,
+        cov / noise**2,
+        rtol=1e-6,
+        atol=1e-9,
     )

@@ -10,7 +10,7 @@ import numpy as np
 import torch
 
 from farsighter.exploration import SCHEDULES
-from tests.conftest import tiny
+from tests.conftest import parts, tiny
 
 DESIGN = Path(__file__).resolve().parent.parent / "docs" / "design.md"
 
@@ -27,7 +27,7 @@ def test_the_documented_rule_is_under_60_lines_and_holds_draws_as_it_says(tmp_pa
     exec(compile(code, str(DESIGN), "exec"), {})
     try:
         assert "episode-or-t" in SCHEDULES
-        from farsighter.agents.farsighter import FarsighterAgent
+        from farsighter.agents import build_agent
 
         cfg = tiny(
             "farsighter",
@@ -38,13 +38,13 @@ def test_the_documented_rule_is_under_60_lines_and_holds_draws_as_it_says(tmp_pa
         import gymnasium as gym
 
         env = gym.make("CartPole-v1")
-        agent = FarsighterAgent(
+        agent = build_agent(
             cfg, env.observation_space, env.action_space, frame_stack=1, device=torch.device("cpu")
         )
         obs = np.full((1, 4), 0.3, np.float32)
         for _ in range(12):  # draws at steps 1, 6, 11: held for T = 5 steps each
             agent.act(obs, 10)
-        assert agent.counters.draws == 3
+        assert parts(agent).counters.draws == 3
         # a whole run with it, resumed from its checkpoint at step 500 as the loop does
         from farsighter.train import train
 

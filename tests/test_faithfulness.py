@@ -13,11 +13,10 @@ import torch
 
 from farsighter.agents import build_agent
 from farsighter.agents.ddqn import DDQNAgent
-from farsighter.agents.farsighter import FarsighterAgent
 from farsighter.agents.naf import NAFAgent
 from farsighter.config import make_config
 from farsighter.replay import ReplayBuffer, VectorStep
-from tests.conftest import inner, tiny
+from tests.conftest import eq8, inner, parts, tiny
 
 CPU = torch.device("cpu")
 
@@ -55,7 +54,7 @@ def perturb(module: torch.nn.Module, scale: float = 0.5, seed: int = 7) -> None:
 def minibatch(agent: Any, k: int = 1) -> dict[str, torch.Tensor]:
     from farsighter.agents.common import batch_tensors
 
-    return batch_tensors(agent.replay.sample(32, k=k, gamma=agent.cfg.gamma), CPU)
+    return batch_tensors(inner(agent).replay.sample(32, k=k, gamma=inner(agent).cfg.gamma), CPU)
 
 
 # ------------------------------------------------------------------ Algorithm 1's order (item 1)
@@ -73,12 +72,12 @@ def test_refresh_comes_before_the_target_sync(tmp_path: Path) -> None:
     )
     feed(agent, 199)
     agent.learn(199)
-    before = agent.head.mean_AD.clone()
+    before = parts(agent).head.mean_AD.clone()
     feed(agent, 1, seed=1)
     agent.learn(200)  # both fall here
-    assert agent.head.num_refreshes == 1
-    assert not torch.allclose(agent.head.mean_AD, before)
-    assert torch.equal(agent.loss.target_mean_AD, agent.head.mean_AD)
+    assert parts(agent).head.num_refreshes == 1
+    assert not torch.allclose(parts(agent).head.mean_AD, before)
+    assert torch.equal(parts(agent).target_mean_AD, parts(agent).head.mean_AD)
 
 
 # ------------------------------------------------------------------ target invariants (item 8)
@@ -87,20 +86,18 @@ def test_refresh_comes_before_the_target_sync(tmp_path: Path) -> None:
 def test_farsighter_targets_use_the_target_torso_and_target_mean(tmp_path: Path) -> None:
     """y = r + gamma^n phi_target(s')^T mean_target[a*] with a* under the online torso and the
     posterior mean (Eq. 8); fails if the target is computed with the online torso or mean."""
-    agent: FarsighterAgent = cartpole_agent(tmp_path, "farsighter", k=3)
+    agent = cartpole_agent(tmp_path, "farsighter", k=3)
     feed(agent, 300)
-    agent.refresh_posterior()
-    agent.loss.target_mean_AD = agent.head.mean_AD.clone()
-    perturb(agent.torso)  # online and target now differ, in torso and in mean
-    agent.head.set_mean(agent.head.mean_AD + 0.3)
+    inner(agent).refresh_posterior()
+    parts(agent).target_mean_AD = parts(agent).head.mean_AD.clone()
+    perturb(inner(agent).torso)  # online and target now differ, in torso and in mean
+    parts(agent).head.set_mean(parts(agent).head.mean_AD + 0.3)
     t = minibatch(agent, k=3)
     with torch.no_grad():
-        a_star = (agent.torso(t.next_obs_B) @ agent.head.mean_AD.T).argmax(1)
-        q_tgt = agent.loss.torso_target(t.next_obs_B) @ agent.loss.target_mean_AD.T
+        a_star = (inner(agent).torso.net(t.next_obs_B) @ parts(agent).head.mean_AD.T).argmax(1)
+        q_tgt = inner(agent).loss.torso_target.net(t.next_obs_B) @ parts(agent).target_mean_AD.T
         expected = t.returns_B + t.bootstrap_B * q_tgt.gather(1, a_star[:, None])[:, 0]
-    assert torch.allclose(
-        agent.loss.targets(t, agent._draws(len(t.actions_B))), expected, atol=1e-5
-    )
+    assert torch.allclose(eq8(agent, t, parts(agent).draws(len(t.actions_B))), expected, atol=1e-5)
 
 
 def test_ddqn_targets_evaluate_with_the_target_network(tmp_path: Path) -> None:
@@ -111,13 +108,13 @@ def test_ddqn_targets_evaluate_with_the_target_network(tmp_path: Path) -> None:
     agent: DDQNAgent = sole.agents  # one seed of the agent written over seeds
     perturb(agent.q)
     t = minibatch(agent)
-    q, q_target = agent.q.net, agent.loss.q_target.net  # the seed's networks alone
+    q, q_target = agent.q.net, inner(agent).loss.q_target.net  # the seed's networks alone
     with torch.no_grad():
         a_star = q(t.next_obs_B).argmax(1)
         q_tgt = q_target(t.next_obs_B).gather(1, a_star[:, None])[:, 0]
         wrong = q(t.next_obs_B).max(1).values
     expected = t.returns_B + t.bootstrap_B * q_tgt
-    y = agent.loss.targets(t)
+    y = inner(agent).loss.targets(t)
     assert torch.allclose(y, expected, atol=1e-5)
     assert not torch.allclose(y, t.returns_B + t.bootstrap_B * wrong, atol=1e-3)
 
@@ -145,9 +142,9 @@ def test_naf_targets_use_the_target_value(tmp_path: Path) -> None:
     perturb(agent.net)
     t_ = minibatch(agent)
     with torch.no_grad():
-        v_target = agent.loss.net_target.value(t_.next_obs_B)
+        v_target = inner(agent).loss.net_target.value(t_.next_obs_B)
         v_online = agent.net.value(t_.next_obs_B)
-    y = agent.loss.targets(t_)
+    y = inner(agent).loss.targets(t_)
     assert torch.allclose(y, t_.returns_B + t_.bootstrap_B * v_target.reshape(-1), atol=1e-5)
     assert not torch.allclose(y, t_.returns_B + t_.bootstrap_B * v_online.reshape(-1), atol=1e-3)
 
@@ -204,7 +201,7 @@ def test_stride_and_recent_window_reach_the_sampler(tmp_path: Path, algo: str) -
 
 
 def test_the_adapted_k_reaches_the_sampler(tmp_path: Path) -> None:
-    agent: FarsighterAgent = cartpole_agent(
+    agent = cartpole_agent(
         tmp_path,
         "farsighter",
         k=5,
@@ -215,10 +212,10 @@ def test_the_adapted_k_reaches_the_sampler(tmp_path: Path) -> None:
         blr__posterior_every=300,
         train_every=1,
     )
-    spy = SpyReplay(agent.replay)
+    spy = SpyReplay(inner(agent).replay)
     feed(agent, 300)
     agent.learn(300)  # updates with k = 5, then the refresh moves k to 6
-    assert agent.counters.k == 6
+    assert parts(agent).counters.k == 6
     spy.calls.clear()
     feed(agent, 1, seed=3)
     agent.learn(301)
@@ -244,43 +241,41 @@ def test_bdqn_preset_redraws_at_every_step(tmp_path: Path) -> None:
     agent = cartpole_agent(tmp_path, "bdqn", preset="bdqn", blr__prior_std=10.0)
     obs = np.full((1, 4), 0.3, np.float32)
     actions = [int(agent.act(obs, 10)[0]) for _ in range(200)]
-    assert agent.counters.draws == 200
+    assert parts(agent).counters.draws == 200
     assert len(set(actions)) == 2
 
 
 def test_thompson_target_uses_the_acting_draw(tmp_path: Path) -> None:
     """blr.target = thompson: one weight set, the latest acting draw, picks a* for the batch."""
-    agent: FarsighterAgent = cartpole_agent(
+    agent = cartpole_agent(
         tmp_path, "bdqn", blr__target="thompson", blr__redraw="step", blr__prior_std=3.0
     )
     feed(agent, 300)
-    agent.refresh_posterior()
+    inner(agent).refresh_posterior()
     agent.act(np.zeros((1, 4), np.float32), 10)
-    w_AD = agent.exploration.w_EAD[0].clone()  # type: ignore[index]
+    w_AD = parts(agent).exploration.w_EAD[0].clone()  # type: ignore[index]
     t = minibatch(agent)
     with torch.no_grad():
-        a_star = (agent.torso(t.next_obs_B) @ w_AD.T).argmax(1)
-        q_tgt = agent.loss.torso_target(t.next_obs_B) @ agent.loss.target_mean_AD.T
+        a_star = (inner(agent).torso.net(t.next_obs_B) @ w_AD.T).argmax(1)
+        q_tgt = inner(agent).loss.torso_target.net(t.next_obs_B) @ parts(agent).target_mean_AD.T
     expected = t.returns_B + t.bootstrap_B * q_tgt.gather(1, a_star[:, None])[:, 0]
-    draws = agent.counters.draws
-    assert torch.allclose(
-        agent.loss.targets(t, agent._draws(len(t.actions_B))), expected, atol=1e-5
-    )
-    assert agent.counters.draws == draws  # the target made no new draw
+    draws = parts(agent).counters.draws
+    assert torch.allclose(eq8(agent, t, parts(agent).draws(len(t.actions_B))), expected, atol=1e-5)
+    assert parts(agent).counters.draws == draws  # the target made no new draw
 
 
 def test_posterior_max_target_and_uniform_sampling(tmp_path: Path) -> None:
-    agent: FarsighterAgent = cartpole_agent(
+    agent = cartpole_agent(
         tmp_path, "bdqn", blr__posterior_target="max", blr__posterior_sampling="uniform"
     )
     feed(agent, 300)
-    perturb(agent.torso)
+    perturb(inner(agent).torso)
     t = minibatch(agent)
     with torch.no_grad():
-        q_tgt = agent.loss.torso_target(t.next_obs_B) @ agent.loss.target_mean_AD.T
+        q_tgt = inner(agent).loss.torso_target.net(t.next_obs_B) @ parts(agent).target_mean_AD.T
     expected = t.returns_B + t.bootstrap_B * q_tgt.max(1).values
-    assert torch.allclose(agent.loss.posterior_targets(t, {}), expected, atol=1e-5)
-    e_N, l_N = agent.replay.uniform_indices(5_000, np.random.default_rng(0))
+    assert torch.allclose(inner(agent).loss.posterior_targets(t, {}), expected, atol=1e-5)
+    e_N, l_N = inner(agent).replay.uniform_indices(5_000, np.random.default_rng(0))
     assert l_N.min() < 20 and l_N.max() > 280  # the whole buffer, not the latest D rows
     assert len(np.unique(l_N)) < len(l_N)  # with replacement
 
@@ -299,36 +294,34 @@ def test_draws_count_weight_draws(
     obs = np.zeros((2, 4), np.float32)
     for _ in range(30):
         agent.act(obs, 10)
-    assert (
-        agent.counters.draws == expected
-    )  # one per environment and draw, none while a draw is held
+    # one per environment and draw, none while a draw is held
+    assert parts(agent).counters.draws == expected
 
 
 # ------------------------------------------------------------------ smaller mismatches (item 5)
 
 
 def test_stride_refresh_uses_one_tuple_per_k(tmp_path: Path) -> None:
-    agent: FarsighterAgent = cartpole_agent(
-        tmp_path, "farsighter", k=4, stride=True, blr__posterior_samples=50
-    )
+    agent = cartpole_agent(tmp_path, "farsighter", k=4, stride=True, blr__posterior_samples=50)
     feed(agent, 400)
     seen: list[np.ndarray] = []
-    inner = agent.replay.sample_indices
+    replay = inner(agent).replay
+    original = replay.sample_indices
 
     def spy(e: np.ndarray, s: np.ndarray, k: int, gamma: float, **kw: Any) -> Any:
-        batch = inner(e, s, k, gamma, **kw)
-        seen.append(agent.replay.t_ep[batch.env_index, batch.index % agent.replay.capacity])
+        batch = original(e, s, k, gamma, **kw)
+        seen.append(replay.t_ep[batch.env_index, batch.index % replay.capacity])
         return batch
 
-    agent.replay.sample_indices = spy  # type: ignore[method-assign]
-    agent.refresh_posterior()
+    replay.sample_indices = spy  # type: ignore[method-assign]
+    inner(agent).refresh_posterior()
     t_ep = np.concatenate(seen)
     assert (t_ep % 4 == 0).all()
     assert 40 <= len(t_ep) <= 50  # D tuples of the stride, from the latest k D rows
 
 
 def test_empty_every_refresh_empties_even_when_k_stays(tmp_path: Path) -> None:
-    agent: FarsighterAgent = cartpole_agent(
+    agent = cartpole_agent(
         tmp_path,
         "farsighter",
         k=3,
@@ -338,15 +331,18 @@ def test_empty_every_refresh_empties_even_when_k_stays(tmp_path: Path) -> None:
         adaptive_k__empty_every_refresh=True,
     )
     feed(agent, 300)
-    agent.refresh_posterior()
-    assert agent.counters.k == 3 and (agent.replay.floor == agent.replay.count).all()
-    other: FarsighterAgent = cartpole_agent(
+    inner(agent).refresh_posterior()
+    assert (
+        parts(agent).counters.k == 3
+        and (inner(agent).replay.floor == inner(agent).replay.count).all()
+    )
+    other = cartpole_agent(
         tmp_path, "farsighter", k=3, adaptive_k__enabled=True, adaptive_k__k_min=3,
         adaptive_k__k_max=3,
     )  # fmt: skip
     feed(other, 300)
-    other.refresh_posterior()
-    assert (other.replay.floor == 0).all()  # the default empties only when k changes
+    inner(other).refresh_posterior()
+    assert (inner(other).replay.floor == 0).all()  # the default empties only when k changes
 
 
 def test_naf_soft_update_every_n_steps(tmp_path: Path) -> None:
@@ -359,7 +355,7 @@ def test_naf_soft_update_every_n_steps(tmp_path: Path) -> None:
         cfg, env.observation_space, env.action_space, frame_stack=1, device=CPU
     )
     rng = np.random.default_rng(0)
-    target = [p.clone() for p in agent.loss.net_target.parameters()]
+    target = [p.clone() for p in inner(agent).loss.net_target.parameters()]
     for step in range(1, 201):
         end = step % 50 == 0
         agent.observe(VectorStep(
@@ -369,7 +365,7 @@ def test_naf_soft_update_every_n_steps(tmp_path: Path) -> None:
             [rng.normal(size=3).astype(np.float32)] if end else None,
         ))  # fmt: skip
         agent.learn(step)
-        now = list(agent.loss.net_target.parameters())
+        now = list(inner(agent).loss.net_target.parameters())
         moved = any(not torch.equal(a, b) for a, b in zip(target, now, strict=True))
         assert moved == (step % 100 == 0), step  # only on the N-step boundaries
         target = [p.clone() for p in now]

@@ -10,22 +10,25 @@ import numpy as np
 import pytest
 import torch
 
-from farsighter.agents.farsighter import FarsighterAgent
+from farsighter.agents import build_agent
 from farsighter.agents.farsighter_posterior import accumulate
+from farsighter.agents.protocol import Sole
 from farsighter.exploration import SCHEDULES
 from farsighter.replay import VectorStep
-from tests.conftest import tiny
+from tests.conftest import inner, parts, tiny
 
 
-def make_agent(tmp_path: Path, algo: str = "farsighter", **kw: object) -> FarsighterAgent:
+def make_agent(tmp_path: Path, algo: str = "farsighter", **kw: object) -> Sole:
     cfg = tiny(algo, tmp_path, learning_starts=0, **kw)
     env = gym.make("CartPole-v1")
-    return FarsighterAgent(
+    agent = build_agent(
         cfg, env.observation_space, env.action_space, frame_stack=1, device=torch.device("cpu")
     )
+    assert isinstance(agent, Sole)
+    return agent
 
 
-def feed(agent: FarsighterAgent, n: int, seed: int = 0) -> None:
+def feed(agent: Sole, n: int, seed: int = 0) -> None:
     rng = np.random.default_rng(seed)
     for t in range(n):
         end = t % 40 == 39
@@ -45,7 +48,7 @@ def test_kstep_draws_a_fresh_sample_at_every_step(tmp_path: Path) -> None:
     agent = make_agent(tmp_path, blr__prior_std=10.0)
     obs = np.zeros((1, 4), np.float32) + 0.3
     actions = [int(agent.act(obs, 10)[0]) for _ in range(200)]
-    assert agent.counters.draws == 200  # Algorithm 2 line 2: one draw per environment step
+    assert parts(agent).counters.draws == 200  # Algorithm 2 line 2: one draw per environment step
     assert len(set(actions)) == 2  # the same state gets different Thompson actions
 
 
@@ -67,18 +70,19 @@ def test_greedy_evaluation_is_deterministic(tmp_path: Path) -> None:
 def test_posterior_refresh_shrinks_variance_and_target_mean_stays(tmp_path: Path) -> None:
     agent = make_agent(tmp_path)
     feed(agent, 600)
-    phi = agent.torso(torch.randn(32, 4))
-    before = agent.head.predictive_var(phi).mean().item()
-    target_before = agent.loss.target_mean_AD.clone()
-    agent.refresh_posterior()
-    assert agent.head.num_refreshes == 1
-    assert agent.head.predictive_var(phi).mean().item() < before
-    assert torch.equal(agent.loss.target_mean_AD, target_before)  # only copied every N steps
-    torso_target = {k: v.clone() for k, v in agent.loss.torso_target.state_dict().items()}
+    phi = inner(agent).torso.net(torch.randn(32, 4))
+    before = parts(agent).head.predictive_var(phi).mean().item()
+    target_before = parts(agent).target_mean_AD.clone()
+    inner(agent).refresh_posterior()
+    assert parts(agent).head.num_refreshes == 1
+    assert parts(agent).head.predictive_var(phi).mean().item() < before
+    assert torch.equal(parts(agent).target_mean_AD, target_before)  # only copied every N steps
+    torso_target = {k: v.clone() for k, v in inner(agent).loss.torso_target.state_dict().items()}
     for _ in range(10):
-        agent.update()
+        inner(agent).update()
     assert all(
-        torch.equal(torso_target[k], v) for k, v in agent.loss.torso_target.state_dict().items()
+        torch.equal(torso_target[k], v)
+        for k, v in inner(agent).loss.torso_target.state_dict().items()
     )
 
 
@@ -92,12 +96,15 @@ def test_adaptive_k_moves_and_empties_buffer(tmp_path: Path) -> None:
         adaptive_k__k_max=6,
     )
     feed(agent, 600)
-    agent.refresh_posterior()
-    assert agent.counters.k == 6  # variance below the target: k += 1
-    assert len(agent.replay) > 0 and (agent.replay.floor == agent.replay.count).all()
+    inner(agent).refresh_posterior()
+    assert parts(agent).counters.k == 6  # variance below the target: k += 1
+    assert (
+        len(inner(agent).replay) > 0
+        and (inner(agent).replay.floor == inner(agent).replay.count).all()
+    )
     feed(agent, 300, seed=1)
-    agent.refresh_posterior()
-    assert agent.counters.k == 6  # clamped at k_max
+    inner(agent).refresh_posterior()
+    assert parts(agent).counters.k == 6  # clamped at k_max
 
     low = make_agent(
         tmp_path,
@@ -108,9 +115,9 @@ def test_adaptive_k_moves_and_empties_buffer(tmp_path: Path) -> None:
         adaptive_k__empty_buffer=False,
     )
     feed(low, 600)
-    low.refresh_posterior()
+    inner(low).refresh_posterior()
     assert (
-        low.counters.k == 2 and (low.replay.floor == 0).all()
+        parts(low).counters.k == 2 and (inner(low).replay.floor == 0).all()
     )  # above the target: k -= 1, buffer kept
 
 
@@ -118,25 +125,27 @@ def test_incremental_mode_accumulates_update_minibatches(tmp_path: Path) -> None
     agent = make_agent(tmp_path, blr__mode="incremental", k=3, train_every=2, batch_size=16)
     feed(agent, 500)
     for _ in range(40):
-        agent.update()
-    assert agent.head.count_A.sum().item() == 40 * 16  # every update's minibatch was added
+        inner(agent).update()
+    assert parts(agent).head.count_A.sum().item() == 40 * 16  # every update's minibatch was added
     # each row has weight train_every / batch_size, so one env step has unit weight on average
     fresh = make_agent(tmp_path, blr__mode="incremental", train_every=2, batch_size=16)
     phi_BD, a_B, y_B = torch.randn(16, 32), torch.zeros(16, dtype=torch.int64), torch.randn(16)
-    accumulate(fresh.cfg, fresh.head, fresh.recent_phi, phi_BD, a_B, y_B)
+    accumulate(inner(fresh).cfg, parts(fresh).head, parts(fresh).recent_phi, phi_BD, a_B, y_B)
     w = 2 / 16
-    assert torch.allclose(fresh.head.phiphiT_ADD[0].float(), w * phi_BD.T @ phi_BD, atol=1e-5)
-    assert torch.allclose(fresh.head.phiy_AD[0].float(), w * phi_BD.T @ y_B, atol=1e-5)
-    phi = agent.torso(torch.randn(32, 4)).detach()
-    before = agent.head.predictive_var(phi).mean().item()
-    replay_rows = len(agent.replay)
-    agent.refresh_posterior()  # no features recomputed from the buffer
-    assert len(agent.replay) == replay_rows
-    assert agent.head.num_refreshes == 1
-    assert agent.head.predictive_var(phi).mean().item() < before
-    y_stats = agent.head.phiy_AD.clone()
-    agent.refresh_posterior()
-    assert torch.equal(agent.head.phiy_AD, y_stats)  # a refresh alone adds nothing
+    assert torch.allclose(
+        parts(fresh).head.phiphiT_ADD[0].float(), w * phi_BD.T @ phi_BD, atol=1e-5
+    )
+    assert torch.allclose(parts(fresh).head.phiy_AD[0].float(), w * phi_BD.T @ y_B, atol=1e-5)
+    phi = inner(agent).torso.net(torch.randn(32, 4)).detach()
+    before = parts(agent).head.predictive_var(phi).mean().item()
+    replay_rows = len(inner(agent).replay)
+    inner(agent).refresh_posterior()  # no features recomputed from the buffer
+    assert len(inner(agent).replay) == replay_rows
+    assert parts(agent).head.num_refreshes == 1
+    assert parts(agent).head.predictive_var(phi).mean().item() < before
+    y_stats = parts(agent).head.phiy_AD.clone()
+    inner(agent).refresh_posterior()
+    assert torch.equal(parts(agent).head.phiy_AD, y_stats)  # a refresh alone adds nothing
 
 
 def test_data_weight_scales_the_rows_weight_in_the_statistics(tmp_path: Path) -> None:
@@ -149,8 +158,8 @@ def test_data_weight_scales_the_rows_weight_in_the_statistics(tmp_path: Path) ->
         agent = make_agent(
             tmp_path, blr__mode="incremental", blr__data_weight=c, train_every=2, batch_size=16
         )
-        accumulate(agent.cfg, agent.head, agent.recent_phi, phi_BD, a_B, y_B)
-        heads.append(agent.head)
+        accumulate(inner(agent).cfg, parts(agent).head, parts(agent).recent_phi, phi_BD, a_B, y_B)
+        heads.append(parts(agent).head)
     one, eight = heads
     assert torch.allclose(eight.phiphiT_ADD, 8 * one.phiphiT_ADD, atol=1e-4)
     assert torch.allclose(eight.phiy_AD, 8 * one.phiy_AD, atol=1e-4)
@@ -169,13 +178,13 @@ def test_q_variance_without_adaptive_k_is_the_refreshs_own_when_read(tmp_path: P
     feed(agent, 300)
     for refresh in range(3):
         for _ in range(16 if refresh == 0 else 5):  # 16 x 128 rows: the window is full, in place
-            agent.update()
-        agent.refresh_posterior()
-        at_refresh = greedy_predictive_variance(agent.head, agent.recent_phi.rows())
+            inner(agent).update()
+        inner(agent).refresh_posterior()
+        at_refresh = greedy_predictive_variance(parts(agent).head, parts(agent).recent_phi.rows())
         for _ in range(7):  # more rows in the recent window, the posterior unchanged
-            agent.update()
+            inner(agent).update()
         assert agent.episode_diagnostics() == {"k": 3.0}  # an episode's row: nothing computed
-        assert agent.counters._pending is not None
+        assert parts(agent).counters._pending is not None
         if refresh == 1:  # read through a checkpoint first
             assert agent.state_dict(include_replay=False)["counters"]["q_variance"] == at_refresh
         assert agent.diagnostics()["q_variance"] == at_refresh
@@ -185,8 +194,8 @@ def test_q_variance_without_adaptive_k_is_the_refreshs_own_when_read(tmp_path: P
     )
     feed(other, 300)
     for _ in range(5):
-        other.update()
-    other.refresh_posterior()  # its own deferred value, replaced by the load
+        inner(other).update()
+    inner(other).refresh_posterior()  # its own deferred value, replaced by the load
     other.load_state_dict(saved)
     assert other.diagnostics()["q_variance"] == at_refresh
 
@@ -236,4 +245,4 @@ def test_exploration_resumes_its_draws_from_new_and_old_checkpoints(
         twin = make_agent(tmp_path, blr__prior_std=10.0, blr__redraw=redraw, blr__redraw_every=3)
         twin.load_state_dict(state)
         assert [twin.act(obs[t % 6], 10) for t in range(12)] == later
-        assert twin.counters.draws == agent.counters.draws
+        assert parts(twin).counters.draws == parts(agent).counters.draws

@@ -3,16 +3,13 @@ target cache as a wrapper on the target network that clears itself when the targ
 
 from __future__ import annotations
 
-import copy
 from pathlib import Path
 
-import numpy as np
 import pytest
 import torch
 from torch import nn
 
-from farsighter.agents.learner import CachedTarget, Learner
-from farsighter.replay.target_cache import TargetCache
+from farsighter.agents.learner import Learner
 from tests.conftest import tiny
 
 
@@ -72,28 +69,3 @@ def test_an_eager_learner_is_never_compiled(tmp_path: Path) -> None:
     assert eager.step == eager._update and eager.graphs is False
     compiled = Learner(_loss(net), net.parameters(), cfg, torch.device("cpu"))
     assert hasattr(compiled.step, "_torchdynamo_orig_callable")
-
-
-@pytest.mark.parametrize("hooked", [True, False])
-def test_the_target_cache_clears_itself_when_the_target_is_copied(hooked: bool) -> None:
-    online = nn.Linear(4, 2)
-    target = copy.deepcopy(online).requires_grad_(False)
-    cache = TargetCache(num_envs=1, rows_per_env=16, width=2, device=torch.device("cpu"))
-    cached = CachedTarget(target, cache if hooked else None)
-    if not hooked:  # the same cache without the wrapper's hook: a stale row after the copy
-        cached.cache = cache
-    obs = torch.randn(4, 4)
-    e, rows = np.zeros(4, dtype=np.int64), np.arange(4)
-    first = cached(obs, e, rows)
-    torch.testing.assert_close(first, target(obs))
-    assert cache.misses == 4 and torch.equal(cached(obs, e, rows), first) and cache.hits == 4
-    with torch.no_grad():
-        online.weight.add_(1.0)
-    target.load_state_dict(online.state_dict())  # the hard copy (Algorithm 1 line 8)
-    after = cached(obs, e, rows)
-    if hooked:
-        torch.testing.assert_close(after, online(obs).detach())
-        assert cache.misses == 8
-    else:
-        assert torch.equal(after, first)  # what the hook prevents
-    assert torch.equal(cached(obs), target(obs))  # without keys: the network itself

@@ -17,7 +17,7 @@ import farsighter
 from farsighter.config import make_config
 from farsighter.rundir import CHECKPOINT_FILE
 from farsighter.session import POLICY_FILE
-from tests.conftest import inner
+from tests.conftest import inner, parts
 
 SHORT = {
     "total_steps": 300,
@@ -65,9 +65,9 @@ def test_a_ddqn_policy_file_holds_the_online_network_alone(runs: Any) -> None:
 
 def test_a_farsighter_policy_file_is_its_networks_and_one_factor_per_action(runs: Any) -> None:
     run, agent = runs["farsighter"]
-    a, d = agent.head.num_actions, agent.head.dim
+    a, d = parts(agent).head.num_actions, parts(agent).head.dim
     assert d == 128  # the defaults: the posterior over the MLP's 128 learned features
-    bound = _bytes(agent.torso.state_dict()) + 4 * a * d * d + 4 * a * d + 32_000
+    bound = _bytes(inner(agent).torso.state_dict()) + 4 * a * d * d + 4 * a * d + 32_000
     size = (run / POLICY_FILE).stat().st_size
     assert size <= bound, (size, bound)
     saved = torch.load(run / POLICY_FILE, weights_only=True)["agent"]
@@ -76,7 +76,7 @@ def test_a_farsighter_policy_file_is_its_networks_and_one_factor_per_action(runs
     tensors = {key for key, value in head.items() if isinstance(value, torch.Tensor)}
     assert tensors == {"mean_AD", "sqrt_cov_ADD"}
     assert head["mean_AD"].dtype == head["sqrt_cov_ADD"].dtype == torch.float32
-    assert torch.equal(head["sqrt_cov_ADD"], agent.head.sqrt_cov_ADD.cpu())
+    assert torch.equal(head["sqrt_cov_ADD"], parts(agent).head.sqrt_cov_ADD.cpu())
     checkpoint = torch.load(run / CHECKPOINT_FILE, weights_only=False)["agent"]
     assert checkpoint["head"]["phiphiT_ADD"].dtype == torch.float64  # statistics stay there
     assert {"torso_target", "opt", "target_mean_AD"} <= set(checkpoint)
@@ -90,8 +90,10 @@ def test_greedy_actions_from_the_policy_file_are_the_trained_agents(runs: Any, a
     expected = agent.act(obs, 0, explore=False)
     np.testing.assert_array_equal(policy.act(obs), expected)
     if algo == "farsighter":  # the loaded posterior's mean and factor, as the agent acts with
-        assert torch.equal(policy.agent.head.mean_AD, agent.head.mean_AD.cpu())
-        assert torch.equal(policy.agent.head.sqrt_cov_ADD, agent.head.sqrt_cov_ADD.cpu())
+        assert torch.equal(parts(policy.agent).head.mean_AD, parts(agent).head.mean_AD.cpu())
+        assert torch.equal(
+            parts(policy.agent).head.sqrt_cov_ADD, parts(agent).head.sqrt_cov_ADD.cpu()
+        )
 
 
 def test_stochastic_acting_draws_from_the_saved_factor(runs: Any) -> None:
@@ -100,10 +102,10 @@ def test_stochastic_acting_draws_from_the_saved_factor(runs: Any) -> None:
     not uniformly (the warm-up's uniform actions) and not greedily."""
     run, _ = runs["farsighter"]
     policy = farsighter.load_agent(run)
-    head = policy.agent.head
+    head = parts(policy.agent).head
     obs = _observations(8) * 2
     with torch.no_grad():
-        phi = policy.agent.torso(torch.as_tensor(obs))
+        phi = inner(policy.agent).torso.net(torch.as_tensor(obs))
         mu = phi @ head.mean_AD.T
         var = head.predictive_var(phi) * head.act_scale**2
     z = (mu[:, 0] - mu[:, 1]) / torch.sqrt(var.sum(dim=1))

@@ -19,6 +19,7 @@ from farsighter.config import validate
 from farsighter.errors import ConfigError
 from farsighter.networks import MLPTorso, RandomFeatureTorso
 from farsighter.seeds import batchable
+from tests.conftest import inner
 
 
 def test_the_torso_appends_fixed_random_relu_features() -> None:
@@ -68,7 +69,7 @@ def test_an_online_torso_and_its_target_share_their_random_features(tmp_path: Pa
     """online_and_target computes psi(s') once for both torsos: the same numbers as two
     forwards, after training moved the online torso away from its target, and the random
     layers equal in both after the target copy and a checkpoint load (what the sharing needs)."""
-    from farsighter.agents.farsighter import FarsighterAgent
+    from farsighter.agents import build_agent
     from farsighter.networks import online_and_target
 
     cfg = make_config(
@@ -86,13 +87,13 @@ def test_an_online_torso_and_its_target_share_their_random_features(tmp_path: Pa
     )
     train(cfg)
     env = gym.make("farsighter/DeepSea6-v0")
-    agent = FarsighterAgent(
+    agent = build_agent(
         cfg, env.observation_space, env.action_space, frame_stack=1, device=torch.device("cpu")
     )
     agent.load_state_dict(
         torch.load(tmp_path / "run" / "checkpoint.pt", weights_only=False)["agent"]
     )
-    online, target = agent.torso, agent.loss.torso_target
+    online, target = inner(agent).torso.net, inner(agent).loss.torso_target.net
     assert isinstance(online, RandomFeatureTorso) and isinstance(target, RandomFeatureTorso)
     assert torch.equal(online.rf_weight, target.rf_weight)
     assert torch.equal(online.rf_bias, target.rf_bias)
@@ -130,8 +131,9 @@ def _sd_by_visits(random_features: int, tmp: Path) -> tuple[float, float]:
     )
     train(cfg, [Keep()])
     agent = seen["agent"]
-    rows = int(agent.replay.count[0])
-    frames = agent.replay.frames[0, :rows].reshape(rows, -1)
+    replay = inner(agent).replay
+    rows = int(replay.count[0])
+    frames = replay.frames[0, :rows].reshape(rows, -1)
     visits = np.bincount(frames[frames.max(1) > 0].argmax(1), minlength=n * n).reshape(n, n)
     _, var = agent.q_estimate(np.eye(n * n, dtype=np.float32))
     sd = np.sqrt(var).max(1).reshape(n, n)

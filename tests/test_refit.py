@@ -5,17 +5,18 @@ from __future__ import annotations
 
 import math
 from pathlib import Path
+from typing import Any
 
 import numpy as np
 import pytest
 import torch
 
 import farsighter.ops.refit as refit_module
-from farsighter.agents.farsighter import FarsighterAgent
 from farsighter.agents.farsighter_posterior import largest_reward_sum, replay_rows
 from farsighter.ops.blr import BLRHead
 from farsighter.ops.refit import REFIT_SLACK, ReplayRows, bellman_targets, refit
 from farsighter.replay import VectorStep
+from tests.conftest import inner, parts
 from tests.test_exploration_defaults import make_agent
 
 GAMMA = 0.9
@@ -130,7 +131,7 @@ def test_an_overestimating_fit_is_rejected_and_a_sound_one_kept() -> None:
         assert bool(head.mean_AD.any()) is accepted
 
 
-def switched_agent(path: Path, mode: str) -> FarsighterAgent:
+def switched_agent(path: Path, mode: str) -> Any:
     """An agent of ``blr.switch_restart = mode`` that updated at every step of a four-state
     walk, then switched at the paid step (the 13th, which ends the episode)."""
     values = {
@@ -159,7 +160,7 @@ def switched_agent(path: Path, mode: str) -> FarsighterAgent:
         agent.observe(step)
         if t < 12:
             agent.learn(t)  # updates from step 0 (learning_starts 0)
-    assert agent.loss.calibrated
+    assert parts(agent).calibrated
     return agent
 
 
@@ -170,16 +171,17 @@ def test_the_switch_refits_the_posterior_to_the_replay(tmp_path: Path) -> None:
     refitted, prior = (switched_agent(tmp_path / m, m) for m in ("refit", "prior"))
     eye = np.eye(4, dtype=np.float32)
     rows = 13  # every step's one-step window, the paid one's ended by its terminal
-    assert float(refitted.head.count_A.sum()) == pytest.approx(rows * 4 / 2)
-    torch.testing.assert_close(refitted.loss.target_mean_AD, refitted.head.mean_AD)
-    assert float(prior.head.count_A.sum()) == 0 and not prior.head.mean_AD.any()
+    p, prior_head, whole = parts(refitted), parts(prior).head, inner(refitted)
+    assert float(p.head.count_A.sum()) == pytest.approx(rows * 4 / 2)
+    torch.testing.assert_close(p.target_mean_AD, p.head.mean_AD)
+    assert float(prior_head.count_A.sum()) == 0 and not prior_head.mean_AD.any()
     # the paid step's value, learned at once; the prior has no values at all
     q_refit, _ = refitted.q_estimate(eye)
-    assert refitted.counters.updates > 0
+    assert p.counters.updates > 0
     # the rows it fitted carry the ceiling of their returns (the paid step's 1)
-    fitted = replay_rows(refitted.replay, refitted.cfg, 1, torch.device("cpu"), refitted.torso)
+    fitted = replay_rows(whole.replay, whole.cfg, 1, torch.device("cpu"), whole.torso.net)
     assert fitted.ceiling == pytest.approx(1.0)
-    paid = int(refitted.replay.actions[0, 12])
+    paid = int(whole.replay.actions[0, 12])
     assert q_refit[3, paid] > 0.3 and q_refit[3, paid] == q_refit.max(), q_refit
 
 
@@ -190,25 +192,27 @@ def test_a_rejected_refit_is_the_restart_from_the_prior(
     same posterior, the same widths, the same targets' mean and the same next draws."""
     monkeypatch.setattr(refit_module, "fit_is_sound", lambda y, limits: False)
     rejected, prior = (switched_agent(tmp_path / m, m) for m in ("refit", "prior"))
+    mine, theirs = parts(rejected), parts(prior)
     for name in ("phiphiT_ADD", "phiy_AD", "count_A", "mean_AD"):
-        torch.testing.assert_close(getattr(rejected.head, name), getattr(prior.head, name))
-    assert (rejected.head.noise_std, rejected.head.prior_std) == (
-        prior.head.noise_std,
-        prior.head.prior_std,
+        torch.testing.assert_close(getattr(mine.head, name), getattr(theirs.head, name))
+    assert (mine.head.noise_std, mine.head.prior_std) == (
+        theirs.head.noise_std,
+        theirs.head.prior_std,
     )
-    torch.testing.assert_close(rejected.loss.target_mean_AD, prior.loss.target_mean_AD)
+    torch.testing.assert_close(mine.target_mean_AD, theirs.target_mean_AD)
     obs = np.eye(4, dtype=np.float32)[:1]
     assert [int(rejected.act(obs, 13 + t)[0]) for t in range(20)] == [
         int(prior.act(obs, 13 + t)[0]) for t in range(20)
     ]
 
 
-def same_posterior(a: FarsighterAgent, b: FarsighterAgent) -> None:
+def same_posterior(a: Any, b: Any) -> None:
     """The same statistics, widths, targets' mean and next 20 draws."""
+    pa, pb = parts(a), parts(b)
     for name in ("phiphiT_ADD", "phiy_AD", "count_A", "mean_AD"):
-        torch.testing.assert_close(getattr(a.head, name), getattr(b.head, name), rtol=0, atol=0)
-    assert (a.head.noise_std, a.head.prior_std) == (b.head.noise_std, b.head.prior_std)
-    torch.testing.assert_close(a.loss.target_mean_AD, b.loss.target_mean_AD, rtol=0, atol=0)
+        torch.testing.assert_close(getattr(pa.head, name), getattr(pb.head, name), rtol=0, atol=0)
+    assert (pa.head.noise_std, pa.head.prior_std) == (pb.head.noise_std, pb.head.prior_std)
+    torch.testing.assert_close(pa.target_mean_AD, pb.target_mean_AD, rtol=0, atol=0)
     obs = np.eye(4, dtype=np.float32)[:1]
     assert [int(a.act(obs, 13 + t)[0]) for t in range(20)] == [
         int(b.act(obs, 13 + t)[0]) for t in range(20)
@@ -222,14 +226,14 @@ def test_refit_zero_keeps_a_sound_fit_and_zeroes_the_targets_of_a_rejected_one(
     for bit; where it fails, zero-targets' (the rows kept, their targets 0), not the prior's."""
     kept, refitted = (switched_agent(tmp_path / "a" / m, m) for m in ("refit-zero", "refit"))
     same_posterior(kept, refitted)
-    assert float(kept.head.phiy_AD.abs().sum()) > 0  # the fit's targets (the paid step's)
+    assert float(parts(kept).head.phiy_AD.abs().sum()) > 0  # the fit's targets (the paid step's)
     monkeypatch.setattr(refit_module, "fit_is_sound", lambda y, limits: False)
     rejected, zeroed, prior = (
         switched_agent(tmp_path / "b" / m, m) for m in ("refit-zero", "zero-targets", "prior")
     )
     same_posterior(rejected, zeroed)
-    assert float(rejected.head.phiy_AD.abs().sum()) == 0
-    assert float(rejected.head.count_A.sum()) > float(prior.head.count_A.sum()) == 0
+    assert float(parts(rejected).head.phiy_AD.abs().sum()) == 0
+    assert float(parts(rejected).head.count_A.sum()) > float(parts(prior).head.count_A.sum()) == 0
 
 
 def test_a_switch_before_any_update_restarts_from_the_prior(tmp_path: Path) -> None:
@@ -256,8 +260,9 @@ def test_a_switch_before_any_update_restarts_from_the_prior(tmp_path: Path) -> N
                 [obs[0]] if end else None,
             )
         )
-    assert agent.loss.calibrated and agent.counters.updates == 0
-    assert float(agent.head.count_A.sum()) == 0 and not agent.head.mean_AD.any()
+    p = parts(agent)
+    assert p.calibrated and p.counters.updates == 0
+    assert float(p.head.count_A.sum()) == 0 and not p.head.mean_AD.any()
 
 
 def test_the_ceiling_is_the_largest_reward_sum_the_replay_showed(tmp_path: Path) -> None:
@@ -285,12 +290,13 @@ def test_the_ceiling_is_the_largest_reward_sum_the_replay_showed(tmp_path: Path)
                 [obs[0]] if term or trunc else None,
             )
         )
-    e_N, l_N = agent.replay.recent_indices(100)
-    assert largest_reward_sum(agent.replay, e_N, l_N, 0.9) == pytest.approx(1.0)
-    assert largest_reward_sum(agent.replay, e_N, l_N, 1.0) == pytest.approx(1.0)
+    replay = inner(agent).replay
+    e_N, l_N = replay.recent_indices(100)
+    assert largest_reward_sum(replay, e_N, l_N, 0.9) == pytest.approx(1.0)
+    assert largest_reward_sum(replay, e_N, l_N, 1.0) == pytest.approx(1.0)
     # without the terminal reward the second episode's 0.5 + 0.9 * 0.5 is the largest
-    agent.replay.rewards[0, 2] = 0.0
-    assert largest_reward_sum(agent.replay, e_N, l_N, 0.9) == pytest.approx(0.95)
+    replay.rewards[0, 2] = 0.0
+    assert largest_reward_sum(replay, e_N, l_N, 0.9) == pytest.approx(0.95)
     # a cost after the rewards (its return to the end 0.5 - 0.9 * 0.5 * 0.9 ...) leaves it
-    agent.replay.rewards[0, 4] = -5.0
-    assert largest_reward_sum(agent.replay, e_N, l_N, 0.9) == pytest.approx(0.5)
+    replay.rewards[0, 4] = -5.0
+    assert largest_reward_sum(replay, e_N, l_N, 0.9) == pytest.approx(0.5)

@@ -5,20 +5,21 @@ from __future__ import annotations
 
 from collections import Counter
 from pathlib import Path
+from typing import Any
 
 import gymnasium as gym
 import numpy as np
 import torch
 
-from farsighter.agents.farsighter import FarsighterAgent
-from tests.conftest import tiny
+from farsighter.agents import build_agent
+from tests.conftest import parts, tiny
 
 ACTIONS = 5
 
 
 def make_agent(
     tmp_path: Path, revisit_action: str, redraw: str = "k", prior_std: float = 1e-6
-) -> FarsighterAgent:
+) -> Any:
     """An agent over 5 actions whose draws sit on the posterior mean (a prior this narrow gives
     every draw the mean's argmax) unless ``prior_std`` widens them."""
     cfg = tiny(
@@ -30,13 +31,13 @@ def make_agent(
         blr__revisit_action=revisit_action,
     )
     space = gym.spaces.Box(-1.0, 1.0, (4,), np.float32)
-    return FarsighterAgent(
+    return build_agent(
         cfg, space, gym.spaces.Discrete(ACTIONS), frame_stack=1, device=torch.device("cpu")
     )
 
 
-def end_episode(agent: FarsighterAgent) -> None:
-    agent.exploration.observe(np.array([True]))
+def end_episode(agent: Any) -> None:
+    parts(agent).exploration.observe(np.array([True]))
 
 
 def test_a_revisited_observation_gets_a_uniform_action_and_a_new_one_the_draws(
@@ -56,7 +57,7 @@ def test_a_revisited_observation_gets_a_uniform_action_and_a_new_one_the_draws(
     assert int(agent.act(obs, 10)[0]) == greedy
 
 
-def agent_greedy(agent: FarsighterAgent, obs: np.ndarray) -> int:
+def agent_greedy(agent: Any, obs: np.ndarray) -> int:
     return int(agent.act(obs, 10, explore=False)[0])
 
 
@@ -69,7 +70,7 @@ def test_without_revisits_the_run_is_the_same_bit_for_bit(tmp_path: Path) -> Non
     for mode in ("draw", "uniform"):
         agent = make_agent(tmp_path / mode, mode, redraw="step", prior_std=10.0)
         acts = [int(agent.act(o, 10)[0]) for o in obs]
-        runs.append((acts, agent.gen.get_state()))
+        runs.append((acts, parts(agent).gen.get_state()))
     assert runs[0][0] == runs[1][0]
     assert len(set(runs[0][0])) > 1
     assert torch.equal(runs[0][1], runs[1][1])
@@ -100,8 +101,8 @@ def test_unpaid_breaks_loops_in_episodes_after_one_that_paid_nothing(tmp_path: P
 
     def episode(reward: float) -> set[int]:
         actions = {int(agent.act(obs, 10)[0]) for _ in range(200)}
-        agent.exploration.observe(np.array([False]), np.array([reward]))
-        agent.exploration.observe(np.array([True]), np.array([0.0]))
+        parts(agent).exploration.observe(np.array([False]), np.array([reward]))
+        parts(agent).exploration.observe(np.array([True]), np.array([0.0]))
         return actions
 
     assert len(episode(0.0)) == ACTIONS  # the first episode: uniform at the revisits
@@ -125,7 +126,7 @@ def test_timeout_breaks_loops_in_episodes_after_one_that_ran_to_its_time_limit(
 
     def episode(truncated: bool) -> set[int]:
         actions = {int(agent.act(obs, 10)[0]) for _ in range(200)}
-        agent.exploration.observe(np.array([True]), np.array([1.0]), np.array([truncated]))
+        parts(agent).exploration.observe(np.array([True]), np.array([1.0]), np.array([truncated]))
         return actions
 
     assert episode(truncated=True) == {greedy}  # the first episode: the draw's action

@@ -18,7 +18,7 @@ import pytest
 import torch
 import torch.nn.functional as F
 
-from farsighter.agents import farsighter_seeds
+from farsighter.agents import farsighter as farsighter_agent
 from farsighter.algorithms import seed_batched
 from farsighter.cli import main
 from farsighter.config.presets import PREVIOUS_GENERAL_FARSIGHTER
@@ -241,13 +241,13 @@ def test_settings_a_batch_cannot_take_train_alone(tmp_path: Path, tiny_config: A
     """Farsighter's batch refuses what it does not batch, and the seeds then train in turn."""
     base = tiny_config("farsighter", tmp_path, preset="general", blr__random_features=0)
     cfg = tiny_config("farsighter", tmp_path, preset="general", adaptive_k__enabled=True)
-    assert "adaptive k" in farsighter_seeds.supports(cfg, _box(), torch.device("cpu"))
+    assert "adaptive k" in farsighter_agent.supports(cfg, _box(), torch.device("cpu"))
     assert not batchable(cfg)
-    assert farsighter_seeds.supports(base, _box(), torch.device("cpu")) == ""
+    assert farsighter_agent.supports(base, _box(), torch.device("cpu")) == ""
     wide = tiny_config("farsighter", tmp_path, preset="general", blr__random_features=64)
     assert wide.blr.random_features and batchable(wide)  # random features stack
     image = gym.spaces.Box(0, 255, (4, 84, 84), np.uint8)
-    assert "image" in farsighter_seeds.supports(base, image, torch.device("cpu"))
+    assert "image" in farsighter_agent.supports(base, image, torch.device("cpu"))
     assert "ob2i" not in seed_batched() and not batchable(tiny_config("ob2i", tmp_path))
 
 

@@ -145,10 +145,6 @@ def test_no_file_over_the_line_bound() -> None:
     assert not long, f"files over {MAX_LINES} lines: {long}"
 
 
-@pytest.mark.xfail(
-    strict=True,
-    reason="#63 item 1 is open: Farsighter and BDQN keep a seed-batched twin (farsighter_seeds.py)",
-)
 def test_no_seed_batched_twin() -> None:
     twins = sorted(p.name for p in (ROOT / "agents").glob("*_seeds.py"))
     assert not twins, twins

@@ -10,6 +10,7 @@ import pytest
 import torch
 
 from farsighter.replay.target_cache import TargetCache
+from tests.conftest import inner, parts
 from tests.test_farsighter_agent import feed, make_agent
 
 
@@ -66,21 +67,23 @@ def test_an_agent_with_the_cache_trains_as_one_without(tmp_path: Path) -> None:
         mode: make_agent(tmp_path / mode, target_cache=mode, **kw)  # type: ignore[arg-type]
         for mode in ("auto", "off")
     }
-    assert agents["auto"].loss.target.cache is not None and agents["off"].loss.target.cache is None
+    assert parts(agents["auto"]).cache is not None and parts(agents["off"]).cache is None
     losses: dict[str, list[float]] = {"auto": [], "off": []}
     for mode, agent in agents.items():
         feed(agent, 100, seed=4)
         for step in range(100, 400):  # 300 updates, 7 target copies
             feed(agent, 1, seed=step)
-            loss = agent.update()
+            loss = inner(agent).update()
             assert loss is not None
             losses[mode].append(float(loss))
             agent.learn(step)  # target copies (and posterior refreshes) where they fall
-    cache = agents["auto"].loss.target.cache
+    cache = parts(agents["auto"]).cache
     assert cache is not None and cache.hits > cache.misses > 0  # rows were reused
     np.testing.assert_allclose(losses["auto"], losses["off"], rtol=1e-4, atol=1e-6)
     for a, b in zip(
-        agents["auto"].torso.parameters(), agents["off"].torso.parameters(), strict=True
+        inner(agents["auto"]).torso.parameters(),
+        inner(agents["off"]).torso.parameters(),
+        strict=True,
     ):
         torch.testing.assert_close(a, b, rtol=1e-4, atol=1e-5)
 
@@ -91,16 +94,35 @@ def test_a_state_saved_with_another_setting_or_before_the_cache_loads(tmp_path: 
     for agent in (cached, plain):
         feed(agent, 200, seed=1)
         for _ in range(5):
-            agent.update()
-    assert cached.loss.target.cache is not None and cached.loss.target.cache.misses > 0
+            inner(agent).update()
+    assert parts(cached).cache is not None and parts(cached).cache.misses > 0
     plain.load_state_dict(cached.state_dict())  # the cache's state is left aside
-    assert plain.loss.target.cache is None and plain.update() is not None
+    assert parts(plain).cache is None and inner(plain).update() is not None
     cached.load_state_dict(plain.state_dict())  # none saved: the cache starts empty
-    assert cached.loss.target.cache is not None and not (cached.loss.target.cache.tags >= 0).any()
+    assert parts(cached).cache is not None and not (parts(cached).cache.tags >= 0).any()
     old = cached.state_dict()
     old.update(old.pop("exploration"))  # the layout before the exploration object
     del old["draws"], old["target_cache"]  # a checkpoint from before both
     cached.load_state_dict(old)
-    assert cached.update() is not None
+    assert inner(cached).update() is not None
     feed(cached, 1, seed=2)
     assert cached.act(np.zeros((1, 4), np.float32), 10).shape == (1,)
+
+
+def test_the_target_cache_empties_when_the_target_torsos_are_copied_or_loaded(
+    tmp_path: Path,
+) -> None:
+    """Rows cached under the old target torso are never read after the hard copy (Algorithm 1
+    line 8) or any other load of the target torsos."""
+    agent = make_agent(tmp_path, sample_recent=True, target_cache="auto")
+    feed(agent, 200, seed=1)
+    loss, cache = inner(agent).loss, parts(agent).cache
+    assert cache is not None
+    for empty in (
+        loss.copy_target,
+        lambda: loss.torso_target.load_state_dict(loss.torso.state_dict()),
+    ):
+        assert inner(agent).update() is not None
+        assert (cache.tags >= 0).any()
+        empty()
+        assert not (cache.tags >= 0).any()

@@ -17,7 +17,7 @@ import copy
 import dataclasses
 from collections.abc import Sequence
 from functools import partial
-from typing import Any, cast
+from typing import Any
 
 import gymnasium as gym
 import numpy as np
@@ -40,10 +40,10 @@ from farsighter.agents.protocol import SeedAgentsFactory
 from farsighter.agents.seed_members import Member, seed_replay, stack_refusal
 from farsighter.config import Config
 from farsighter.exploration.epsilon import epsilon_greedy, linear_schedule
-from farsighter.networks import QNetwork, online_and_target
+from farsighter.networks import QNetwork
 from farsighter.ops.targets import double_q_target
 from farsighter.replay import Batch, VectorStep
-from farsighter.stacked import OneSeed, SeedNetwork, seed_network
+from farsighter.stacked import SeedNetwork, online_and_target_seeds, seed_network
 
 
 def supports(cfg: Config, obs_space: gym.Space | None, device: torch.device) -> str:
@@ -65,12 +65,11 @@ class DoubleQLoss:
     def targets(self, t: TensorBatch) -> torch.Tensor:
         """y = R + gamma^n Q_target(s_{t+n}, argmax_a Q(s_{t+n}, a)), no bootstrap at a terminal;
         (S * B,)."""
-        if isinstance(self.q, OneSeed) and isinstance(self.q_target, OneSeed):
-            online, target = cast(QNetwork, self.q.net), cast(QNetwork, self.q_target.net)
-            q_next, q_next_target = online_and_target(online, target, t.next_obs_B)
-        else:
-            q_next, q_next_target = self.q.rows(t.next_obs_B), self.q_target.rows(t.next_obs_B)
-        return double_q_target(t.returns_B, t.bootstrap_B, q_next, q_next_target)
+        q_next, q_next_target = online_and_target_seeds(self.q, self.q_target, t.next_obs_B)
+        assert q_next_target is not None
+        return double_q_target(
+            t.returns_B, t.bootstrap_B, q_next.flatten(0, 1), q_next_target.flatten(0, 1)
+        )
 
     def __call__(self, inputs: Tensors) -> Tensors:
         t = TensorBatch.of(inputs)

@@ -19,267 +19,232 @@ Q(s, a) = phi_theta(s)^T w_a with a Bayesian linear regression posterior over ea
 * Adaptive k (Algorithm 1 line 7): after each refresh, the Q-variance (mean of
   phi^T Cov_a phi at the greedy action over the refresh states) moves k by one towards the
   variance target; the replay is emptied when k changes (optional).
+
+Written once over a seed axis: S seeds of one config (S = 1 for a run alone) act, record and
+learn as one computation: one forward of the torsos (:func:`farsighter.stacked.seed_network`: the
+torso alone for S = 1, any architecture, precision, compiled or captured; stacked MLPs for
+S > 1) and one optimizer step for every seed. The rest is each seed's own
+(:class:`~farsighter.agents.farsighter_parts.SeedParts`: posterior, draws, counters, generators,
+target cache), so on CPU each seed of a batch trains bit for bit as it trains alone
+(``tests/test_seeds.py``). Adaptive k, which moves each seed's k on its own, trains its seeds one
+at a time.
 """
 
 from __future__ import annotations
 
+import copy
+from collections.abc import Sequence
 from functools import partial
-from typing import Any
 
 import gymnasium as gym
 import numpy as np
 import torch
 
 from farsighter.agents.common import (
-    RecentRows,
     batch_tensors,
     crossed,
-    load_state,
-    make_replay,
+    minibatch_args,
     obs_tensor,
-    sample_minibatch,
-    save_state,
     updates_owed,
 )
 from farsighter.agents.cuda_graph import Tensors
-from farsighter.agents.farsighter_loss import FarsighterLoss
+from farsighter.agents.farsighter_loss import FarsighterLoss, seed_key
+from farsighter.agents.farsighter_parts import FarsighterMember, SeedParts
 from farsighter.agents.farsighter_posterior import (
-    RECENT_FEATURES,
-    FarsighterCounters,
     accumulate,
-    make_head,
     refresh_posterior,
     replay_rows,
     seeded_torso,
 )
 from farsighter.agents.farsighter_targets import one_step_inputs, uses_one_step
-from farsighter.agents.learner import Learner, make_target_cache
-from farsighter.agents.protocol import AgentFactory
+from farsighter.agents.learner import Learner
+from farsighter.agents.protocol import SeedAgentsFactory
+from farsighter.agents.seed_members import seed_replay, stack_refusal
 from farsighter.config import Config
-from farsighter.exploration import ThompsonExploration
-from farsighter.exploration.optimism import (
-    cut_relative,
-    exploratory_actions,
-    records_exploratory,
-    restart_at_switch,
-    switch_at,
-)
+from farsighter.exploration import optimism
 from farsighter.replay import VectorStep
+from farsighter.stacked import seed_network
+
+
+def supports(cfg: Config, obs_space: gym.Space | None, device: torch.device) -> str:
+    """Why seeds of ``cfg`` cannot train as one batch here ('' when they can)."""
+    if cfg.adaptive_k.enabled:
+        return "adaptive k trains its seeds one at a time (each seed's k moves on its own)"
+    return stack_refusal(cfg, obs_space)
 
 
 class FarsighterAgent:
-    """BLR-headed DQN with Thompson exploration over k steps (``bdqn`` is the k = 1 case)."""
+    """BLR-headed DQN with Thompson exploration over k steps (``bdqn`` is the k = 1 case), for
+    S seeds of one config (``cfgs`` differ only in seed)."""
 
     def __init__(
         self,
-        cfg: Config,
+        cfgs: Sequence[Config],
         obs_space: gym.spaces.Box,
         act_space: gym.spaces.Discrete,
         *,
-        frame_stack: int,
+        frame_stack: int = 1,
         device: torch.device,
     ) -> None:
-        self.cfg = cfg
-        self.device = device
-        self.num_actions = int(act_space.n)
-
-        torso, init_AD = seeded_torso(cfg, obs_space, self.num_actions)
-        self.torso = torso.to(device)
-        self.head = make_head(cfg, self.num_actions, self.torso.out_dim, init_AD, device)
+        cfg = self.cfg = cfgs[0]
+        self.cfgs, self.device, self.num_actions = list(cfgs), device, int(act_space.n)
+        built = [seeded_torso(c, obs_space, self.num_actions) for c in cfgs]  # each seed's own
+        torsos = [torso for torso, _ in built]
+        dim = int(torsos[0].out_dim)
+        self.torso = seed_network(torsos).to(device)
+        torso_target = seed_network([copy.deepcopy(torso) for torso in torsos]).to(device)
+        self.parts = [
+            SeedParts(c, self.num_actions, dim, init_AD, device)
+            for c, (_, init_AD) in zip(cfgs, built, strict=True)
+        ]
         # Eq. 8, with the target features of sampled next states kept until the next copy
-        cache = make_target_cache(cfg, device, self.torso.out_dim)
-        self.loss = FarsighterLoss(self.torso, self.head, cfg, cache)
+        self.loss = FarsighterLoss(self.torso, torso_target, self.parts, cfg)
         capture = not cfg.blr.switches_update  # compiled where asked, not captured
-        self.learner = Learner(self.loss, self.torso.parameters(), cfg, device, capture=capture)
-        self.replay = make_replay(cfg, obs_space, frame_stack, seed=cfg.seed + 1, device=device)
-        self.rng = np.random.default_rng(cfg.seed + 2)
-        self.gen = torch.Generator(device=device)
-        self.gen.manual_seed(cfg.seed + 3)
+        self.learner = Learner(
+            self.loss, self.torso.parameters(), cfg, device, capture=capture, seeds=self.seeds
+        )
+        self.replay = seed_replay(cfgs, obs_space, device, frame_stack)
+        # k_target cut (now or after blr.optimism's switch): each seed's exploratory actions
+        self.cut = optimism.records_exploratory(cfg)
+        self.exploratory_SE: np.ndarray | None = None
 
-        self.counters = FarsighterCounters(k=cfg.k)
-        # Incremental mode: recent minibatch features, for the Q-variance of adaptive k.
-        self.recent_phi = RecentRows(RECENT_FEATURES)
-        # Eq. 7: each environment's weight draw and when it is replaced (blr.redraw).
-        self.exploration = ThompsonExploration(cfg, self.head, self.counters)
-        # k_target cut: whether each environment's latest training action was exploratory
-        self.cut = records_exploratory(cfg)
-        self.exploratory_E: np.ndarray | None = None
-        self.unpaid = 0  # blr.rearm_episodes: episodes ended in a row without a reward
+    @property
+    def seeds(self) -> int:
+        return len(self.cfgs)
 
     # ------------------------------------------------------------------ acting
-    def act(self, obs_E: np.ndarray, global_step: int, explore: bool = True) -> np.ndarray:
-        n = obs_E.shape[0]
-        if explore and global_step < self.cfg.learning_starts:
+    def act(self, obs_S: Sequence[np.ndarray], global_step: int) -> np.ndarray:
+        """Each seed's actions, (S, E): uniform from its generator before ``learning_starts``,
+        then Thompson sampling under its own draws (Algorithm 2)."""
+        n = len(obs_S[0])
+        if global_step < self.cfg.learning_starts:
             if self.cut:  # uniform actions are all exploratory
-                self.exploratory_E = np.ones(n, dtype=bool)
-            return np.asarray(self.rng.integers(0, self.num_actions, size=n))
+                self.exploratory_SE = np.ones((self.seeds, n), dtype=bool)
+            return np.stack([p.rng.integers(0, self.num_actions, size=n) for p in self.parts])
         with torch.no_grad():
-            phi_ED = self.torso(obs_tensor(obs_E, self.device))
-            if explore:  # Algorithm 2: Thompson sampling under each environment's draw
-                actions_E = self.exploration.actions(phi_ED, obs_E, self.gen)
-            else:  # evaluation: greedy under the posterior mean
-                actions_E = (phi_ED @ self.head.mean_AD.T).argmax(dim=1)
-            if explore and self.cut:  # the draw chose otherwise than the mean would
-                self.exploratory_E = exploratory_actions(
-                    self.head, phi_ED, actions_E, self.cfg.blr.cut_margin, cut_relative(self.cfg)
+            obs = obs_S[0] if self.seeds == 1 else np.concatenate(obs_S)
+            phi_S = self.torso.each_seed(obs_tensor(obs, self.device))
+            parts = list(enumerate(self.parts))
+            actions = [p.exploration.actions(phi_S[s], obs_S[s], p.gen) for s, p in parts]
+            if self.cut:  # where a seed's draw chose otherwise than its mean would
+                margin, rel = self.cfg.blr.cut_margin, optimism.cut_relative(self.cfg)
+                mark = optimism.exploratory_actions
+                self.exploratory_SE = np.stack(
+                    [mark(p.head, phi_S[s], actions[s], margin, rel) for s, p in parts]
                 )
-        return actions_E.cpu().numpy()
+        return torch.stack(actions).cpu().numpy()
 
-    @torch.no_grad()
-    def q_estimate(self, obs_B: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-        """Posterior mean of Q(s, .) and its predictive variance phi^T Cov_a phi (Eq. 7, 9)."""
-        phi_BD = self.torso(obs_tensor(obs_B, self.device))
-        mean_BA = phi_BD @ self.head.mean_AD.T
-        return mean_BA.cpu().numpy(), self.head.predictive_var(phi_BD).cpu().numpy()
+    def observe(self, steps: Sequence[VectorStep]) -> None:
+        """One vector step of every seed, in seed order."""
+        self.replay.add_steps(steps, self.exploratory_SE if self.cut else None)
+        for s, (p, st) in enumerate(zip(self.parts, steps, strict=True)):
+            done = np.logical_or(st.terminated_E, st.truncated_E)
+            turn, p.unpaid = optimism.switch_at(self.cfg, p.calibrated, p.unpaid, st.reward_E, done)
+            if turn is not None:
+                self.calibrate(s, on=turn)
+            p.exploration.observe(done, st.reward_E, st.truncated_E)
 
-    def observe(self, step: VectorStep) -> None:
-        self.replay.add_step(step, self.exploratory_E if self.cut else None)
-        done_E = np.logical_or(step.terminated_E, step.truncated_E)
-        turn, self.unpaid = switch_at(
-            self.cfg, self.loss.calibrated, self.unpaid, step.reward_E, done_E
-        )
-        if turn is not None:
-            self.calibrate(on=turn)
-        self.exploration.observe(done_E, step.reward_E, step.truncated_E)
-
-    def calibrate(self, restart: bool = True, on: bool = True) -> None:
-        """``blr.optimism = until-reward``'s switch (:meth:`FarsighterLoss.calibrate`); the
-        replay cuts its windows from now on where the calibrated target is cut, and the
+    def calibrate(self, s: int = 0, restart: bool = True, on: bool = True) -> None:
+        """Seed ``s``'s ``blr.optimism = until-reward`` switch (:meth:`SeedParts.calibrate`):
+        its streams cut their windows from now on where its calibrated target is cut, and its
         posterior restarts (``blr.switch_restart``; ``restart = False``: a checkpoint's
         statistics, loaded, are kept). ``on = False``: back to the optimism (rearmed)."""
-        self.loss.calibrate(on)
+        p, streams = self.parts[s], self.replay.seed_streams(s)
+        p.calibrate(on)
         self.learner.forget_graphs()  # the calibrated loss branches (blr.advantage_learning)
-        self.replay.cut_exploratory = self.loss.k_target == "cut"
+        self.replay.cut_E[streams] = p.k_target == "cut"
         if restart and on:  # a refit reads features trained on the replay, else the prior
-            args = (self.replay, self.cfg, self.counters.k, self.device, self.torso)
-            rows = partial(replay_rows, *args) if self.counters.updates else None
-            restart_at_switch(self.cfg, self.head, self.loss.target_mean_AD, rows)
+            own = partial(self.torso.member_forward, s=s)
+            args = (self.replay, self.cfg, p.counters.k, self.device, own, streams)
+            rows = partial(replay_rows, *args) if p.counters.updates else None
+            optimism.restart_at_switch(self.cfg, p.head, p.target_mean_AD, rows)
 
     # ------------------------------------------------------------------ learning
-    def learn(self, global_step: int) -> dict[str, torch.Tensor]:
-        cfg, c = self.cfg, self.counters
-        metrics: dict[str, torch.Tensor] = {}
-        for _ in range(updates_owed(c, cfg, global_step)):
-            loss = self.update()
-            if loss is not None:
-                metrics["td_loss"] = loss
+    def learn(self, global_step: int) -> list[dict[str, torch.Tensor]]:
+        """The updates owed at ``global_step``, then each seed's posterior refresh and target
+        copy; each seed's latest TD loss when it updated."""
+        cfg = self.cfg
+        owed = {updates_owed(p.counters, cfg, global_step) for p in self.parts}
+        assert len(owed) == 1, "the seeds of a batch update together"
+        metrics: list[dict[str, torch.Tensor]] = [{} for _ in self.parts]
+        for _ in range(owed.pop()):
+            loss_S = self.update()
+            if loss_S is not None:
+                metrics = [{"td_loss": loss_S[s]} for s in range(self.seeds)]
         # Algorithm 1's order: the posterior refresh (line 6) comes before the target copy
         # (line 8), so on a step where both fall the target mean is the fresh posterior mean
         # (the BDQN code also sets E_W_target = E_W right after its regression).
-        if global_step >= cfg.learning_starts and crossed(
-            c, "refreshes", global_step, cfg.blr.posterior_every
-        ):
-            self.refresh_posterior()
-        if crossed(c, "target_syncs", global_step, cfg.target_update_every):
-            self.loss.copy_target()  # Algorithm 1 line 8
+        for s, p in enumerate(self.parts):
+            if global_step >= cfg.learning_starts and crossed(
+                p.counters, "refreshes", global_step, cfg.blr.posterior_every
+            ):
+                self.refresh_posterior(s)
+        every = cfg.target_update_every  # (a list: every seed's counter moves)
+        if any([crossed(p.counters, "target_syncs", global_step, every) for p in self.parts]):
+            self.loss.copy_target()  # Algorithm 1 line 8, every seed at once
         return metrics
 
     def update(self) -> torch.Tensor | None:
-        """One step on theta with w at the posterior mean (Eq. 8); the BLR weights stay fixed."""
-        cfg = self.cfg
+        """One step on every seed's theta with its w at its posterior mean (Eq. 8; the BLR
+        weights stay fixed); each seed's loss, (S,), or None before a complete window."""
+        cfg, S, B = self.cfg, self.seeds, self.cfg.batch_size
+        k = self.parts[0].counters.k
         try:
-            batch = sample_minibatch(self.replay, cfg, cfg.batch_size, self.counters.k)
+            batch = self.replay.sample_seeds(B, **minibatch_args(cfg, k))
         except ValueError:  # not enough complete k-step windows yet
             return None
         inputs = batch_tensors(batch, self.device).tensors()
-        if uses_one_step(self.loss.k_target) and self.counters.k > 1:
+        one_step_S = [uses_one_step(p.k_target) and k > 1 for p in self.parts]
+        ends = {"": batch.index + batch.steps}  # the logical rows of s', for the target caches
+        if any(one_step_S):
             # The larger of the k-step and the one-step target of the same start (lower-bound
             # Q-learning, Tang 2020): see Config.k_target. Same s and a, so only s', r, gamma.
-            one_inputs, one = one_step_inputs(self.replay, batch, self.cfg.gamma, self.device)
+            one_inputs, one = one_step_inputs(self.replay, batch, cfg.gamma, self.device)
             inputs.update(one_inputs)
-            inputs.update(
-                self.loss.target_features(
-                    batch.env_index, batch.index + one.steps, inputs["one_next_obs_B"], "one_"
-                )
-            )
-        inputs.update(
-            self.loss.target_features(
-                batch.env_index, batch.index + batch.steps, inputs["next_obs_B"]
-            )
-        )
-        out = self.learner(
-            {**inputs, **self._draws(len(batch.actions), "one_next_obs_B" in inputs)}
-        )
-        if self.cfg.blr.mode == "incremental":
-            accumulate(
-                self.cfg,
-                self.head,
-                self.recent_phi,
-                out["phi_BD"],
-                inputs["actions_B"],
-                out["y_post_B"],
-            )
-        return out["loss"]
+            ends = {"one_": batch.index + one.steps, **ends}
+        if self.parts[0].cache is not None:  # each seed's cache over its own streams
+            E = cfg.num_envs
+            for prefix, end_B in ends.items():
+                obs = inputs[prefix + "next_obs_B"]
+                found = [
+                    p.lookup(
+                        self.torso.by_seed(obs)[s],
+                        batch.env_index[s * B : (s + 1) * B] - s * E,
+                        end_B[s * B : (s + 1) * B],
+                        partial(self.loss.torso_target.member_forward, s=s),
+                    )
+                    for s, p in enumerate(self.parts)
+                ]
+                inputs[prefix + "phi_next_target_BD"] = found[0] if S == 1 else torch.cat(found)
+        for s, p in enumerate(self.parts):
+            for name, x in p.draws(B, one_step_S[s]).items():
+                inputs[seed_key(name, s)] = x
+        out = self.learner(inputs)
+        if cfg.blr.mode == "incremental":
+            actions_S = self.torso.by_seed(inputs["actions_B"])
+            for s, p in enumerate(self.parts):
+                phi_BD, y_B = out[seed_key("phi_BD", s)], out[seed_key("y_post_B", s)]
+                accumulate(cfg, p.head, p.recent_phi, phi_BD, actions_S[s], y_B)
+        return out["loss_S"]
 
-    def _draws(self, rows: int, one_step: bool = False) -> Tensors:
-        """The draws of the targets of ``rows`` rows (:meth:`FarsighterLoss.draws`)."""
-        return self.loss.draws(
-            rows, one_step, self.gen, lambda: self.exploration.acting_draw(self.gen)
-        )
-
-    def refresh_posterior(self) -> None:
-        """Algorithm 1 line 6 (and line 7 with adaptive k): :func:`refresh_posterior`."""
+    def refresh_posterior(self, s: int = 0) -> None:
+        """Algorithm 1 line 6 (and line 7 with adaptive k) for seed ``s``:
+        :func:`refresh_posterior` with its own networks over its own streams' rows."""
+        p = self.parts[s]
         double = self.cfg.blr.posterior_target == "double"  # Eq. 8's target draws
-        refresh_posterior(
-            self.cfg,
-            self.head,
-            self.counters,
-            self.recent_phi,
-            self.replay,
-            self.rng,
-            self.device,
-            self.torso,
-            lambda t: self.loss.posterior_targets(
-                t, self._draws(len(t.actions_B)) if double else {}
-            ),
-        )
 
-    def episode_diagnostics(self) -> dict[str, float]:
-        """What an episode's metrics row reads (k), without the deferred Q-variance."""
-        return {"k": float(self.counters.k)}
+        def targets(t: object) -> torch.Tensor:
+            rows = len(t.actions_B)  # type: ignore[attr-defined]
+            draws: Tensors = p.draws(rows, False) if double else {}
+            return self.loss.posterior_targets(t, draws, s)  # type: ignore[arg-type]
 
-    def diagnostics(self) -> dict[str, float]:
-        return {
-            "k": float(self.counters.k),
-            "q_variance": self.counters.settle().q_variance,
-            "posterior_refreshes": float(self.head.num_refreshes),
-            "jitter_events": float(self.head.jitter_events),
-            "noise_std": self.head.noise_std,
-            **({"act_scale": self.head.act_scale} if self.cfg.blr.act_width != "posterior" else {}),
-        }
+        own = partial(self.torso.member_forward, s=s)
+        args = (p.head, p.counters, p.recent_phi, self.replay, p.rng, self.device, own, targets)
+        refresh_posterior(self.cfg, *args, self.replay.seed_streams(s))
 
-    # ------------------------------------------------------------------ checkpoints
-    SAVED = ("torso", "torso_target", "head", "target_mean_AD", "opt", "rng", "gen", "counters")
-    SAVED_AT = {  # keys of the earlier layout
-        "torso_target": "loss.torso_target",
-        "target_mean_AD": "loss.target_mean_AD",
-        "opt": "learner",
-    }
-
-    def state_dict(self, include_replay: bool = True) -> dict[str, Any]:
-        self.counters.settle()
-        state = save_state(self, self.SAVED, include_replay)
-        state["exploration"] = self.exploration.state_dict()
-        state["recent_phi"] = self.recent_phi.state_dict()
-        if self.cfg.blr.optimism != "always":  # the switch; a default run's keys as before
-            state["calibrated"] = self.loss.calibrated
-        if self.cfg.blr.rearm_episodes:
-            state["unpaid"] = self.unpaid
-        cache = self.loss.target.cache  # keyed by replay rows: of no use without them
-        state["target_cache"] = None if cache is None or not include_replay else cache.state_dict()
-        return state
-
-    def load_state_dict(self, state: dict[str, Any]) -> None:
-        load_state(self, self.SAVED, state)
-        self.recent_phi.load_state_dict(state["recent_phi"])
-        if state.get("calibrated", False) and not self.loss.calibrated:
-            self.calibrate(restart=False)
-        self.unpaid = state.get("unpaid", 0)
-        # a checkpoint from before the exploration object holds its pieces under our own keys
-        self.exploration.load_state_dict(state.get("exploration", state))
-        # the target cache (cleared by the target's load) is kept when the checkpoint has it
-        if self.loss.target.cache is not None:
-            self.loss.target.cache.load_state_dict(state.get("target_cache"))
+    # ------------------------------------------------------------------ one seed
+    def member(self, s: int) -> FarsighterMember:
+        return FarsighterMember(self, s)
 
 
-AGENT: AgentFactory = FarsighterAgent  # the class algorithms.py names; mypy checks the protocol
+SEED_AGENTS: SeedAgentsFactory = FarsighterAgent  # the class farsighter.algorithms names

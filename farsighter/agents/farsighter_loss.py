@@ -1,4 +1,5 @@
-"""Farsighter's and BDQN's loss on theta (Eq. 8) and the regression targets of the posterior.
+"""Farsighter's and BDQN's loss on theta (Eq. 8) and the regression targets of the posterior,
+for S seeds (S = 1 for a run alone).
 
 Q(s, a) = phi_theta(s)^T w_a. The representation theta learns with w fixed at the posterior mean,
 on the double-Q target of k-step returns (section 4.4):
@@ -13,173 +14,173 @@ row and action: ``BLRHead.q_noise_rows``; none where s' is s_t with ``blr.stay_o
 False); with ``k_target = max`` the target is the larger of the k-step and the one-step target
 of the same start, with ``max-mean`` the one larger under the posterior mean (``k_target``).
 
-The loss owns the target torso and the target mean, which move only at the hard copy (Algorithm
-1 line 8: :meth:`FarsighterLoss.copy_target`). It draws nothing: the acting draw and the normals
-come in its inputs (the agent draws them before the update, so a captured step can take them),
-and the target features of s' may come from the target cache.
+The minibatch holds seed 0's B rows, then seed 1's, ...; one forward of the (stacked) torsos gives
+every seed's features, and each seed's targets and loss are its own (:class:`SeedParts`), so its
+gradient is its own loss's. The loss owns the target torsos, which move only at the hard copy
+(Algorithm 1 line 8: :meth:`FarsighterLoss.copy_target`). It draws nothing: each seed's draws come
+in its inputs under ``name@s`` (:func:`seed_key`; the agent draws them before the update, so a
+captured step can take them), and the target features of s' may come from the target caches.
 """
 
 from __future__ import annotations
 
-import copy
-from collections.abc import Callable
+from collections.abc import Sequence
 
-import numpy as np
 import torch
 
 from farsighter.agents.common import TensorBatch, td_loss
 from farsighter.agents.cuda_graph import Tensors
+from farsighter.agents.farsighter_parts import SeedParts
 from farsighter.agents.farsighter_targets import (
     Targets,
-    advantage,
-    eq8_targets,
-    k_or_one_step,
     max_targets,
     one_step_batch,
     one_step_draws,
     q_taken,
-    target_draws,
     uses_one_step,
 )
-from farsighter.agents.learner import CachedTarget
 from farsighter.config import Config
-from farsighter.exploration.optimism import calibrated, without_staying
-from farsighter.networks import Torso, online_and_target
-from farsighter.ops.blr import BLRHead
-from farsighter.replay.target_cache import TargetCache
+from farsighter.stacked import (
+    SeedNetwork,
+    aligned,
+    member_pair,
+    online_and_target_seeds,
+)
+
+DRAWS = ("w_online_AD", "eps_BA", "one_eps_BA")
+"""The names of what the targets draw (:func:`farsighter.agents.farsighter_targets.target_draws`)."""
+
+
+def seed_key(name: str, s: int) -> str:
+    """The input key of seed ``s``'s draw ``name``."""
+    return f"{name}@{s}"
 
 
 class FarsighterLoss:
-    """Eq. 8's squared (or Huber) error of Q at the posterior mean (module docstring)."""
+    """Eq. 8's squared (or Huber) error of Q at the posterior mean, each seed's mean over its
+    own rows, summed over the seeds (module docstring)."""
 
     def __init__(
-        self, torso: Torso, head: BLRHead, cfg: Config, cache: TargetCache | None = None
+        self,
+        torso: SeedNetwork,
+        torso_target: SeedNetwork,
+        parts: Sequence[SeedParts],
+        cfg: Config,
     ) -> None:
-        self.torso, self.head = torso, head
-        self.torso_target = copy.deepcopy(torso).requires_grad_(False)
-        # target features of s' kept per replay row until the next copy (eager runs only)
-        self.target = CachedTarget(self.torso_target, cache)
-        self.target_mean_AD = head.mean_AD.clone()
-        self.kind, self.blr, self.k_target = cfg.loss, cfg.blr, cfg.k_target
-        self.optimistic, self.calibrated = (cfg.blr, cfg.k_target), False  # blr.optimism
+        self.torso, self.torso_target = torso, torso_target.requires_grad_(False)
+        self.parts, self.kind = list(parts), cfg.loss
+        self.S = len(self.parts)
+        caches = [p.cache for p in self.parts if p.cache is not None]
 
-    def calibrate(self, on: bool = True) -> None:
-        """``blr.optimism = until-reward``'s switch: from now on the posterior mean and the
-        k-step target alone (no draw, no max with the one-step target; cut at exploratory
-        actions where ``k_target = cut``); ``on = False``: the optimism again (rearmed)."""
-        self.calibrated = on
-        self.blr, self.k_target = calibrated(*self.optimistic, on)
+        def clear(module: object, keys: object) -> None:
+            for cache in caches:
+                cache.clear()
+
+        if caches:  # a copy into the target torsos, or any load of them, empties the caches
+            torso_target.register_load_state_dict_post_hook(clear)
 
     def copy_target(self) -> None:
-        """Algorithm 1 line 8: target torso and target mean <- online ones (in place)."""
-        self.torso_target.load_state_dict(self.torso.state_dict())  # clears the target cache
-        self.target_mean_AD.copy_(self.head.mean_AD)
+        """Algorithm 1 line 8: every seed's target torso and target mean <- its online ones (in
+        place); the target caches empty."""
+        self.torso_target.load_state_dict(self.torso.state_dict())
+        for p in self.parts:
+            p.target_mean_AD.copy_(p.head.mean_AD)
 
-    @torch.no_grad()
-    def targets(
-        self, t: TensorBatch, draws: Tensors, phi_next_target: torch.Tensor | None = None
-    ) -> torch.Tensor:
-        """y of Eq. 8 with k-step returns; ``draws``: ``w_online_AD`` (thompson) or ``eps_BA``
-        (sample); ``phi_next_target``: phi_target(s') when the cache gave it."""
-        return self.target_and_mean(t, draws, phi_next_target, with_mean=False)[0]
+    def seed_inputs(self, inputs: Tensors, s: int) -> tuple[Tensors, Tensors]:
+        """Seed ``s``'s rows of ``inputs`` and its draws (both as given for one seed)."""
+        draws = {name: inputs[seed_key(name, s)] for name in DRAWS if seed_key(name, s) in inputs}
+        if self.S == 1:
+            return inputs, draws
+        return {key: self.torso.by_seed(x)[s] for key, x in inputs.items() if "@" not in key}, draws
 
-    @torch.no_grad()
-    def target_and_mean(
-        self,
-        t: TensorBatch,
-        draws: Tensors,
-        phi_next_target: torch.Tensor | None = None,
-        with_mean: bool = True,
-    ) -> tuple[torch.Tensor, torch.Tensor | None]:
-        """:meth:`targets`, and (``with_mean``) the same target under the posterior mean, no
-        draw added (``k_target = max-mean`` chooses by it); else None."""
-        if not self.blr.stay_optimism:  # no draw where the window ends where it began
-            draws = without_staying(draws, t.obs_B, t.next_obs_B)
+    def next_features(
+        self, next_obs_B: torch.Tensor, cached_BD: torch.Tensor | None
+    ) -> tuple[torch.Tensor, torch.Tensor]:
+        """phi(s') and phi_target(s') of every seed, (S, B, D) each (``cached_BD``: the target
+        features the caches gave; each seed's slice laid as a tensor alone, so that its
+        products round as its run alone's)."""
+        target = self.torso_target if cached_BD is None else None
+        phi_next, phi_next_target = online_and_target_seeds(self.torso, target, next_obs_B)
         if phi_next_target is None:
-            phi_next, phi_next_target = online_and_target(
-                self.torso, self.torso_target, t.next_obs_B
-            )
-        else:
-            phi_next = self.torso(t.next_obs_B)
-        y_B = eq8_targets(
-            self.head,
-            self.target_mean_AD,
-            self.blr.target,
-            t,
-            phi_next,
-            phi_next_target,
-            draws,
-            self.blr.center_sample,
-            self.blr.target_noise_scale,
-        )
-        if not with_mean:
-            return y_B, None
-        mean = eq8_targets(self.head, self.target_mean_AD, "mean", t, phi_next, phi_next_target, {})
-        return y_B, mean
+            assert cached_BD is not None
+            by_seed = self.torso.by_seed(cached_BD)
+            phi_next_target = by_seed if self.S == 1 else aligned(by_seed)
+        return phi_next, phi_next_target
 
     @torch.no_grad()
-    def posterior_targets(self, t: TensorBatch, draws: Tensors) -> torch.Tensor:
-        """Regression targets of a posterior refresh: Eq. 8's (``blr.posterior_target =
-        double``, with its draws) or y = r^k + gamma^k max_a phi_target(s')^T mean_target_a
-        (``max``, the BDQN code; no draws)."""
-        if self.blr.posterior_target == "double":
-            return self.targets(t, draws)
-        return max_targets(t, self.torso_target(t.next_obs_B), self.target_mean_AD)
+    def targets(self, t: TensorBatch, inputs: Tensors) -> list[torch.Tensor]:
+        """Each seed's y of Eq. 8 on its rows of the minibatch ``t`` (``inputs``: its draws, the
+        cached target features, and the one-step windows' ``one_*`` fields where a seed's
+        ``k_target`` compares them), advantage learning applied where a seed is calibrated."""
+        features = {
+            prefix: self.next_features(
+                inputs[prefix + "next_obs_B"], inputs.get(prefix + "phi_next_target_BD")
+            )
+            for prefix in ("", "one_")
+            if prefix + "next_obs_B" in inputs
+        }
+        gaps = self.gaps(t)
+        ys = []
+        for s, p in enumerate(self.parts):
+            mine, draws = self.seed_inputs(inputs, s)
+            t_s = TensorBatch.of(mine)
+            nxt = (features[""][0][s], features[""][1][s])
+            one = None
+            if "one_" in features and uses_one_step(p.k_target):  # same s and a: s', r, gamma
+                one_nxt = (features["one_"][0][s], features["one_"][1][s])
+                one = (one_step_batch(t_s, mine), one_step_draws(draws), one_nxt)
+            ys.append(gaps[s](p.targets(t_s, draws, nxt, one)))
+        return ys
+
+    @torch.no_grad()
+    def gaps(self, t: TensorBatch) -> list[Targets]:
+        """Each seed's targets -> the same under ``blr.advantage_learning`` once it is
+        calibrated (else as given), with its target torso's features of the rows' starts."""
+        start = None
+        if any(p.advantage_alpha for p in self.parts):
+            start = online_and_target_seeds(self.torso_target, None, t.obs_B)[0]
+        actions_S = self.torso.by_seed(t.actions_B)
+        return [
+            p.advantage(None if start is None else start[s], actions_S[s])
+            for s, p in enumerate(self.parts)
+        ]
+
+    @torch.no_grad()
+    def posterior_targets(self, t: TensorBatch, draws: Tensors, s: int = 0) -> torch.Tensor:
+        """Seed ``s``'s regression targets of a posterior refresh: Eq. 8's
+        (``blr.posterior_target = double``, with its draws) or y = r^k + gamma^k max_a
+        phi_target(s')^T mean_target_a (``max``, the BDQN code; no draws)."""
+        p = self.parts[s]
+        if p.blr.posterior_target == "double":
+            return p.y(t, member_pair(self.torso, self.torso_target, t.next_obs_B, s), draws)
+        return max_targets(t, self.torso_target.member_forward(t.next_obs_B, s), p.target_mean_AD)
 
     def __call__(self, inputs: Tensors) -> Tensors:
-        """The loss of a minibatch (inputs: :class:`TensorBatch`'s fields, the draws, and with
-        ``k_target = max`` the one-step windows' ``one_*`` fields); in incremental mode also the
-        features and regression targets the posterior's statistics add."""
+        """The loss of a minibatch (inputs: :class:`TensorBatch`'s fields, each seed's draws,
+        and where a seed's ``k_target`` compares them the one-step windows' ``one_*`` fields):
+        ``loss`` to differentiate, each seed's ``loss_S``; in incremental mode also each seed's
+        features and regression targets, which the posterior's statistics add
+        (``phi_BD@s``, ``y_post_B@s``)."""
         t = TensorBatch.of(inputs)
-        cached = inputs.get("phi_next_target_BD")
-        if "one_next_obs_B" not in inputs or not uses_one_step(self.k_target):
-            y_B = self.targets(t, inputs, cached)
-        else:  # k_target max or max-mean: same s and a, so only s', r, gamma
-            one = (
-                one_step_batch(t, inputs),
-                one_step_draws(inputs),
-                inputs.get("one_phi_next_target_BD"),
-            )
-            if self.k_target == "max":
-                y_B = k_or_one_step(self.targets(t, inputs, cached), self.targets(*one))
-            else:  # max-mean: the one larger under the mean, with its draw
-                y_B, mean_B = self.target_and_mean(t, inputs, cached)
-                one_B, one_mean_B = self.target_and_mean(*one)
-                y_B = k_or_one_step(y_B, one_B, mean_B, one_mean_B)
-        gap = self.advantage(t)  # blr.advantage_learning, after the switch
-        y_B = gap(y_B)
-        phi_BD = self.torso(t.obs_B)
-        out = {"loss": td_loss(q_taken(phi_BD, self.head.mean_AD, t.actions_B), y_B, self.kind)}
-        if self.blr.mode == "incremental":  # the statistics are added outside the step
-            double = self.blr.posterior_target == "double"
-            out["phi_BD"] = phi_BD.detach()
-            out["y_post_B"] = y_B if double else gap(self.posterior_targets(t, {}))
+        ys = self.targets(t, inputs)
+        phi_S = self.torso.each_seed(t.obs_B)
+        actions_S = self.torso.by_seed(t.actions_B)
+        losses = [
+            td_loss(q_taken(phi_S[s], p.head.mean_AD, actions_S[s]), ys[s], self.kind)
+            for s, p in enumerate(self.parts)
+        ]
+        loss_S = torch.stack(losses)
+        out = {"loss": losses[0] if self.S == 1 else loss_S.sum(), "loss_S": loss_S.detach()}
+        if self.parts[0].cfg.blr.mode == "incremental":  # the statistics are added outside
+            posterior = None  # max (the BDQN code's regression): the target torso's values
+            if self.parts[0].cfg.blr.posterior_target != "double":
+                posterior = online_and_target_seeds(self.torso_target, None, t.next_obs_B)[0]
+                gaps = self.gaps(t)
+            for s, p in enumerate(self.parts):
+                out[seed_key("phi_BD", s)] = phi_S[s].detach()
+                y_B = ys[s]
+                if posterior is not None:
+                    t_s = TensorBatch.of(self.seed_inputs(inputs, s)[0])
+                    y_B = gaps[s](max_targets(t_s, posterior[s], p.target_mean_AD))
+                out[seed_key("y_post_B", s)] = y_B
         return out
-
-    @torch.no_grad()
-    def advantage(self, t: TensorBatch) -> Targets:
-        """Targets -> the same under ``blr.advantage_learning`` once calibrated (else as given),
-        with the target network's values of the rows' start states."""
-        alpha = self.blr.advantage_learning if self.calibrated else 0.0
-        phi_BD = self.torso_target(t.obs_B) if alpha else None
-        return advantage(alpha, phi_BD, self.target_mean_AD, t.actions_B)
-
-    def draws(
-        self,
-        rows: int,
-        one_step: bool,
-        gen: torch.Generator,
-        acting_draw: Callable[[], torch.Tensor],
-    ) -> Tensors:
-        """:func:`target_draws` of this loss's head and ``blr.target``."""
-        return target_draws(self.blr.target, self.head, rows, one_step, gen, acting_draw)
-
-    def target_features(
-        self, e_B: np.ndarray, next_B: np.ndarray, next_obs_B: torch.Tensor, prefix: str = ""
-    ) -> Tensors:
-        """``{prefix + "phi_next_target_BD": phi_target(s')}`` of a minibatch's next states
-        (logical rows ``next_B``) through the target cache; empty without one (the step then
-        runs the target torso itself)."""
-        if self.target.cache is None:
-            return {}
-        return {prefix + "phi_next_target_BD": self.target(next_obs_B, e_B, next_B)}

@@ -1,20 +1,19 @@
-"""One seed of :class:`~farsighter.agents.farsighter_seeds.SeedBatchFarsighter`: what it owns
-beside its slice of the stacked torsos (its posterior, target mean, counters, Thompson draws,
-recent features, generators and target cache), made and seeded as ``FarsighterAgent`` makes its
-own, and Eq. 8 on features it is handed (:class:`SeedParts`); and the seed seen as an agent
-(:class:`FarsighterSeedMember`)."""
+"""One seed of :class:`~farsighter.agents.farsighter.FarsighterAgent`: what it owns beside its
+slice of the torsos (its posterior, target mean, counters, Thompson draws, recent features,
+generators, target cache and the switch of ``blr.optimism``) and Eq. 8 under its posterior on
+features it is handed (:class:`SeedParts`); and the seed seen as an agent
+(:class:`FarsighterMember`), whose checkpoint is the one its run alone writes."""
 
 from __future__ import annotations
 
 import dataclasses
-from collections.abc import Callable
 from functools import partial
 from typing import Any
 
 import numpy as np
 import torch
 
-from farsighter.agents.common import RecentRows, TensorBatch, obs_tensor
+from farsighter.agents.common import RecentRows, TensorBatch, obs_tensor, set_generator_state
 from farsighter.agents.cuda_graph import Tensors
 from farsighter.agents.farsighter_posterior import RECENT_FEATURES, FarsighterCounters, make_head
 from farsighter.agents.farsighter_targets import (
@@ -22,24 +21,21 @@ from farsighter.agents.farsighter_targets import (
     advantage,
     eq8_targets,
     k_or_one_step,
-    one_step_batch,
-    one_step_draws,
     target_draws,
 )
 from farsighter.agents.learner import make_target_cache
 from farsighter.agents.seed_members import Member
 from farsighter.config import Config
 from farsighter.exploration import ThompsonExploration
-from farsighter.exploration.optimism import calibrated, restart_at_switch, without_staying
-from farsighter.stacked import load_member_optimizer_state, member_optimizer_state
+from farsighter.exploration.optimism import calibrated, without_staying
 
-NextFeatures = torch.Tensor | list[torch.Tensor]
-"""Every seed's features of s', (S, B, D), or a list of S (the target caches')."""
+Next = tuple[torch.Tensor, torch.Tensor]
+"""phi(s') and phi_target(s') of one seed's rows, (B, D) each."""
 
 
 class SeedParts:
-    """One seed's own parts, made and seeded as ``FarsighterAgent`` makes them alone, and its
-    Eq. 8 on given features."""
+    """One seed's own parts, made and seeded from its config (numpy generator seed + 2, torch
+    generator seed + 3), and its Eq. 8 on given features."""
 
     def __init__(
         self, cfg: Config, num_actions: int, dim: int, init_AD: torch.Tensor, device: torch.device
@@ -49,107 +45,98 @@ class SeedParts:
         self.blr, self.k_target = cfg.blr, cfg.k_target
         self.calibrated, self.unpaid = False, 0  # blr.optimism's switch, blr.rearm_episodes
         self.head = make_head(cfg, num_actions, dim, init_AD, device)
-        self.target_mean_AD = self.head.mean_AD.clone()
+        self.target_mean_AD = self.head.mean_AD.clone()  # moved by the target copy alone
         self.counters = FarsighterCounters(k=cfg.k)
+        # Eq. 7: each environment's weight draw and when it is replaced (blr.redraw)
         self.exploration = ThompsonExploration(cfg, self.head, self.counters)
+        # incremental mode: recent minibatch features, for the Q-variance of adaptive k
         self.recent_phi = RecentRows(RECENT_FEATURES)
         self.rng = np.random.default_rng(cfg.seed + 2)
         self.gen = torch.Generator(device=device)
         self.gen.manual_seed(cfg.seed + 3)
-        self.cache = make_target_cache(cfg, device, dim)  # FarsighterLoss's, keyed by its streams
+        # phi_target(s') of replay rows (keyed by this seed's streams) until the next copy
+        self.cache = make_target_cache(cfg, device, dim)
 
-    def calibrate(self, restart: bool = True, on: bool = True) -> None:
-        """``blr.optimism = until-reward``'s switch (``FarsighterAgent.calibrate``)."""
+    def calibrate(self, on: bool = True) -> None:
+        """``blr.optimism = until-reward``'s switch: from now on the posterior mean and the
+        k-step target alone (no draw, no max with the one-step target; cut at exploratory
+        actions where ``k_target = cut``); ``on = False``: the optimism again (rearmed)."""
         self.calibrated = on
         self.blr, self.k_target = calibrated(self.cfg.blr, self.cfg.k_target, on)
-        if restart and on:
-            restart_at_switch(self.cfg, self.head, self.target_mean_AD)
 
-    def draws(self, rows: int, one_step: bool) -> Tensors:
-        """The targets' draws (``FarsighterAgent._draws``), from this seed's generator."""
+    def draws(self, rows: int, one_step: bool = False) -> Tensors:
+        """What the targets of ``rows`` rows draw (:func:`target_draws`), from this seed's
+        generator: drawn before the update, so that a captured step can take them."""
         acting = partial(self.exploration.acting_draw, self.gen)
         return target_draws(self.blr.target, self.head, rows, one_step, self.gen, acting)
 
-    def target_features(
-        self,
-        obs_B: torch.Tensor,
-        e_B: np.ndarray,
-        end_B: np.ndarray,
-        forward: Callable[[torch.Tensor], torch.Tensor],
+    @torch.no_grad()
+    def lookup(
+        self, obs_B: torch.Tensor, e_B: np.ndarray, end_B: np.ndarray, forward: Any
     ) -> torch.Tensor:
-        """phi_target(s') from this seed's cache (``CachedTarget``'s lookup), its misses
-        through ``forward``, its own target torso alone."""
+        """phi_target(s') of rows ``end_B`` of streams ``e_B`` from this seed's cache, its
+        misses through ``forward`` (its own target torso alone)."""
         assert self.cache is not None
         return self.cache.lookup(
             e_B, end_B, lambda i: forward(obs_B[torch.from_numpy(i).to(obs_B.device)])
         )
 
     @torch.no_grad()
-    def y(
-        self,
-        t: TensorBatch,
-        phi_next: torch.Tensor,
-        phi_next_target: torch.Tensor,
-        draws: Tensors,
-        kind: str | None = None,
-    ) -> torch.Tensor:
-        """y of Eq. 8 under this seed's posterior and target mean (``kind``: ``blr.target``
-        unless given; ``mean`` for the target under the posterior mean)."""
-        head, blr = self.head, self.blr
+    def y(self, t: TensorBatch, nxt: Next, draws: Tensors, kind: str | None = None) -> torch.Tensor:
+        """y of Eq. 8 under this seed's posterior and target mean from the features of s'
+        (``kind``: ``blr.target`` unless given; ``mean``: the target under the posterior mean)."""
+        blr = self.blr
         if not blr.stay_optimism:  # no draw where the window ends where it began
             draws = without_staying(draws, t.obs_B, t.next_obs_B)
         return eq8_targets(
-            head,
+            self.head,
             self.target_mean_AD,
             blr.target if kind is None else kind,
             t,
-            phi_next,
-            phi_next_target,
+            *nxt,
             draws,
             blr.center_sample,
             blr.target_noise_scale,
         )
 
+    @torch.no_grad()
     def targets(
         self,
-        mine: Tensors,
-        k_step: tuple[torch.Tensor, NextFeatures],
-        one_step: tuple[torch.Tensor, NextFeatures] | None,
-        s: int,
-        with_one_step: bool,
+        t: TensorBatch,
+        draws: Tensors,
+        nxt: Next,
+        one: tuple[TensorBatch, Tensors, Next] | None = None,
     ) -> torch.Tensor:
-        """This seed's (``s``) y of Eq. 8 on its rows ``mine`` and the batch's features of s'
-        (``k_step``: phi and phi_target of the k-step windows; ``one_step``: of the one-step
-        windows of ``k_target = max``): ``FarsighterLoss.__call__``'s targets."""
-        t, draws = TensorBatch.of(mine), self.draws(len(mine["actions_B"]), with_one_step)
-        nxt, nxt_target = k_step
-        y_B = self.y(t, nxt[s], nxt_target[s], draws)
-        if not with_one_step:
+        """This seed's y of Eq. 8: on the k-step windows ``t`` (features of s' ``nxt``), and
+        with ``one`` (``k_target`` max or max-mean: the one-step windows of the same starts,
+        their draws and features) the larger of the two, or the one larger under the mean."""
+        y_B = self.y(t, nxt, draws)
+        if one is None:
             return y_B
-        assert one_step is not None
-        one, (one_next, one_next_target) = one_step_batch(t, mine), one_step
-        one_B = self.y(one, one_next[s], one_next_target[s], one_step_draws(draws))
+        one_t, one_draws, one_nxt = one
+        one_B = self.y(one_t, one_nxt, one_draws)
         if self.k_target == "max":
             return k_or_one_step(y_B, one_B)
-        mean_B = self.y(t, nxt[s], nxt_target[s], {}, "mean")
-        return k_or_one_step(
-            y_B, one_B, mean_B, self.y(one, one_next[s], one_next_target[s], {}, "mean")
-        )
+        mean_B, one_mean_B = self.y(t, nxt, {}, "mean"), self.y(one_t, one_nxt, {}, "mean")
+        return k_or_one_step(y_B, one_B, mean_B, one_mean_B)
+
+    @property
+    def advantage_alpha(self) -> float:
+        """``blr.advantage_learning``'s alpha once calibrated, else 0."""
+        return self.blr.advantage_learning if self.calibrated else 0.0
 
     def advantage(self, phi_target_BD: torch.Tensor | None, actions_B: torch.Tensor) -> Targets:
-        """This seed's targets -> the same under ``blr.advantage_learning`` once it is calibrated
-        (``FarsighterLoss.advantage``), from the target features of the rows' start states."""
-        alpha = self.blr.advantage_learning if self.calibrated else 0.0
-        return advantage(alpha, phi_target_BD, self.target_mean_AD, actions_B)
+        """This seed's targets -> the same under ``blr.advantage_learning`` once calibrated,
+        from the target features of the rows' start states."""
+        return advantage(self.advantage_alpha, phi_target_BD, self.target_mean_AD, actions_B)
 
 
-class FarsighterSeedMember(Member):
-    """A seed of :class:`~farsighter.agents.farsighter_seeds.SeedBatchFarsighter`:
-    ``FarsighterAgent`` alone."""
+class FarsighterMember(Member):
+    """One seed of a :class:`~farsighter.agents.farsighter.FarsighterAgent`, as an agent."""
 
     def __init__(self, batch: Any, s: int) -> None:
         super().__init__(batch, s)
-        self.parts = batch.parts[s]
+        self.parts: SeedParts = batch.parts[s]
 
     def q_mean(self, obs_B: np.ndarray) -> torch.Tensor:
         """Q at the posterior mean, phi(s)^T mean_a, (B, A)."""
@@ -157,13 +144,13 @@ class FarsighterSeedMember(Member):
 
     @torch.no_grad()
     def q_estimate(self, obs_B: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """Posterior mean of Q(s, .) and its predictive variance phi^T Cov_a phi (Eq. 7, 9)."""
         phi_BD = self._phi(obs_B)
         mean_BA = phi_BD @ self.parts.head.mean_AD.T
         return mean_BA.cpu().numpy(), self.parts.head.predictive_var(phi_BD).cpu().numpy()
 
     def explore(self, obs_E: np.ndarray, global_step: int) -> np.ndarray:
-        """Uniform before ``learning_starts``, then a Thompson draw of this seed's
-        (``FarsighterAgent.act``)."""
+        """Uniform before ``learning_starts``, then a Thompson draw of this seed's."""
         p = self.parts
         if global_step < self.cfg.learning_starts:
             return np.asarray(p.rng.integers(0, self.batch.num_actions, size=len(obs_E)))
@@ -187,50 +174,51 @@ class FarsighterSeedMember(Member):
             "posterior_refreshes": float(head.num_refreshes),
             "jitter_events": float(head.jitter_events),
             "noise_std": head.noise_std,
+            **({"act_scale": head.act_scale} if self.cfg.blr.act_width != "posterior" else {}),
         }
 
     def state_dict(self, include_replay: bool = True) -> dict[str, Any]:
-        """The checkpoint of ``FarsighterAgent`` alone, for this seed."""
+        """This seed's checkpoint, the one its run alone writes."""
         b, s, p = self.batch, self.s, self.parts
-        return (
-            {
-                "torso": b.torso.member_state(s),
-                "torso_target": b.torso_target.member_state(s),
-                "head": p.head.state_dict(),
-                "target_mean_AD": p.target_mean_AD.clone(),
-                "opt": member_optimizer_state(b.opt, s),
-                "rng": p.rng.bit_generator.state,
-                "gen": p.gen.get_state(),
-                "counters": dataclasses.asdict(p.counters.settle()),
-                "replay": b.replay.member_state(s) if include_replay else None,
-                "exploration": p.exploration.state_dict(),
-                "recent_phi": p.recent_phi.state_dict(),
-                "target_cache": p.cache.state_dict()
-                if p.cache is not None and include_replay
-                else None,
-            }
-            | ({"calibrated": p.calibrated} if self.cfg.blr.optimism != "always" else {})
-            | ({"unpaid": p.unpaid} if self.cfg.blr.rearm_episodes else {})
-        )
+        cache = p.cache.state_dict() if p.cache is not None and include_replay else None
+        state = {
+            "torso": b.torso.member_state(s),
+            "torso_target": b.loss.torso_target.member_state(s),
+            "head": p.head.state_dict(),
+            "target_mean_AD": p.target_mean_AD.clone(),
+            "opt": b.learner.member_state(s),
+            "rng": p.rng.bit_generator.state,
+            "gen": p.gen.get_state(),
+            "counters": dataclasses.asdict(p.counters.settle()),
+            "replay": b.replay.member_state(s) if include_replay else None,
+            "exploration": p.exploration.state_dict(),
+            "recent_phi": p.recent_phi.state_dict(),
+            "target_cache": cache,  # keyed by replay rows: of no use without them
+        }
+        if self.cfg.blr.optimism != "always":  # the switch
+            state["calibrated"] = p.calibrated
+        if self.cfg.blr.rearm_episodes:
+            state["unpaid"] = p.unpaid
+        return state
 
     def load_state_dict(self, state: dict[str, Any]) -> None:
         """A checkpoint of this seed (written alone or in a batch). Seeds resume together only
-        from checkpoints with the same counters (:func:`farsighter.seeds.train_seeds` groups
-        them so)."""
+        from checkpoints with the same counters (:mod:`farsighter.seeds` groups them so)."""
         b, s, p = self.batch, self.s, self.parts
         b.torso.load_member(s, state["torso"])
-        b.torso_target.load_member(s, state["torso_target"])
+        b.loss.torso_target.load_member(s, state["torso_target"])
         p.head.load_state_dict(state["head"])
         p.target_mean_AD.copy_(state["target_mean_AD"])
-        load_member_optimizer_state(b.opt, s, state["opt"])
+        b.learner.load_member(s, state["opt"])
         p.rng.bit_generator.state = state["rng"]
-        p.gen.set_state(state["gen"])
+        set_generator_state(p.gen, state["gen"])
         for key, value in state["counters"].items():
             setattr(p.counters, key, value)
         p.recent_phi.load_state_dict(state["recent_phi"])
         if state.get("calibrated", False) and not p.calibrated:
             b.calibrate(s, restart=False)
         p.unpaid = state.get("unpaid", 0)
+        # a checkpoint from before the exploration object holds its pieces under our own keys
         p.exploration.load_state_dict(state.get("exploration", state))
         if p.cache is not None:  # the rows it keeps, when the checkpoint has them
             p.cache.load_state_dict(state.get("target_cache"))

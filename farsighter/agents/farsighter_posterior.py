@@ -1,7 +1,6 @@
-"""Farsighter's posterior refresh (Algorithm 1 lines 6 and 7), for one posterior: written once
-for :class:`~farsighter.agents.farsighter.FarsighterAgent` and each seed of
-:class:`~farsighter.agents.farsighter_seeds.SeedBatchFarsighter`, which hand it their own
-networks (``torso``) and regression targets (``targets``)."""
+"""Farsighter's posterior refresh (Algorithm 1 lines 6 and 7), for one posterior: each seed of
+:class:`~farsighter.agents.farsighter.FarsighterAgent` hands it its own networks (``torso``),
+streams and regression targets (``targets``)."""
 
 from __future__ import annotations
 

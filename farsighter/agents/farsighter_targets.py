@@ -1,6 +1,6 @@
-"""Eq. 8 on given features: the math of Farsighter's loss (agents/farsighter_loss) that the seed
-batch (agents/farsighter_seeds) shares, seed by seed: the targets, the larger of the k-step and
-the one-step target, the one-step windows, and what the targets draw."""
+"""Eq. 8 on given features: the math of Farsighter's loss (agents/farsighter_loss), which each
+seed's parts (agents/farsighter_parts) apply under their own posterior: the targets, the larger
+of the k-step and the one-step target, the one-step windows, and what the targets draw."""
 
 from __future__ import annotations
 

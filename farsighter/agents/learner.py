@@ -14,8 +14,8 @@ The loss follows the rules a captured step needs (no host synchronisation, no ra
 state updated in place); the agent draws what the loss needs before the call. Its checkpoint is
 the optimizer's state dict, the form agents saved before the learner existed.
 
-The target cache lives beside it, as a wrapper on the target network that clears itself when the
-target is copied: :class:`CachedTarget`.
+The target cache (:func:`make_target_cache`) lives beside it: whether a run keeps one depends on
+whether its step runs eagerly.
 """
 
 from __future__ import annotations
@@ -24,7 +24,6 @@ import copy
 from collections.abc import Callable, Iterable
 from typing import Any
 
-import numpy as np
 import torch
 from torch import nn
 
@@ -112,35 +111,6 @@ class Learner:
         not show (a captured CUDA graph replays the branches taken at capture; eager and
         compiled steps need nothing)."""
         reset_step(self.step)
-
-
-class CachedTarget:
-    """A target network whose outputs for replay rows are kept until it is copied into.
-
-    Called with the rows' keys (``streams``, ``rows``: the logical replay rows of the
-    observations), it runs the network over the rows not seen since the last copy only
-    (:class:`~farsighter.replay.target_cache.TargetCache`); without keys, or without a cache, it
-    is the network. The cache clears itself whenever the network's ``load_state_dict`` runs: the
-    hard target copy and a checkpoint load alike, so no owner has to remember to."""
-
-    def __init__(self, net: nn.Module, cache: TargetCache | None) -> None:
-        self.net = net
-        self.cache = cache
-        if cache is not None:
-            net.register_load_state_dict_post_hook(lambda module, keys: cache.clear())
-
-    def __call__(
-        self,
-        obs_B: torch.Tensor,
-        streams_B: np.ndarray | None = None,
-        rows_B: np.ndarray | None = None,
-    ) -> torch.Tensor:
-        if self.cache is None or streams_B is None or rows_B is None:
-            return self.net(obs_B)
-        with torch.no_grad():
-            return self.cache.lookup(
-                streams_B, rows_B, lambda i: self.net(obs_B[torch.from_numpy(i).to(obs_B.device)])
-            )
 
 
 def make_target_cache(cfg: Config, device: torch.device, width: int) -> TargetCache | None:

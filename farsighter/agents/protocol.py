@@ -130,6 +130,11 @@ class Sole:
     def diagnostics(self) -> dict[str, float]:
         return self.seed.diagnostics()
 
+    def episode_diagnostics(self) -> dict[str, float]:
+        """The seed's ``episode_diagnostics()`` where it has one, else its diagnostics."""
+        cheap = getattr(self.seed, "episode_diagnostics", None)
+        return cheap() if callable(cheap) else self.seed.diagnostics()
+
     def q_estimate(self, obs_B: np.ndarray) -> tuple[np.ndarray, np.ndarray | None]:
         return self.seed.q_estimate(obs_B)
 
