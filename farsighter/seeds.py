@@ -1,12 +1,13 @@
-"""Several seeds of one config in one process, as one batched computation.
+"""Several seeds of one config in one process.
 
-``farsighter train --seeds 1 2 ... S`` trains S independent runs. Where the agent has a
-seed-batched form (``Algorithm.seed_batch`` in :mod:`farsighter.algorithms`: DDQN and k-DDQN,
-Farsighter and BDQN, RND and k-RND) they
-train together: one forward pass acts for every seed, one backward pass updates them all, and
-the loop below steps each seed's own environments, replay and run log in turn. Elsewhere the
-seeds train one after another through :func:`farsighter.train.train`. Either way each seed is
-an ordinary run:
+``farsighter train --seeds 1 2 ... S`` trains S independent runs in one loop
+(:func:`farsighter.train.run_seeds`). Where the agent is written over a seed axis
+(``Algorithm.seed_batch`` in :mod:`farsighter.algorithms`: DDQN and k-DDQN, Farsighter and BDQN,
+RND and k-RND) and its settings stack, they are one computation: one forward pass acts for every
+seed, one backward pass updates them all. Elsewhere (OB2I, NAF, bf16, compile, CUDA graphs,
+adaptive k) the loop steps one agent per seed together (:class:`farsighter.agents.protocol.Each`);
+seeds on image observations, whose replays are GBs, and such seeds resumed, train one after
+another through :func:`farsighter.train.train`. Either way each seed is an ordinary run:
 
 * its own run directory (``runs/<env>__<algo>__s<seed>``, or ``RUN_DIR/s<seed>`` under a given
   ``--run-dir``), with the files, checkpoints and summary a run alone writes;
@@ -31,6 +32,7 @@ from typing import Any
 import torch
 
 from farsighter import algorithms
+from farsighter.agents.cuda_graph import check_compiler, graphs_enabled
 from farsighter.config import Config, validate
 from farsighter.envs import check_spaces, make_vector_env
 from farsighter.errors import ConfigError
@@ -75,18 +77,25 @@ def train_seeds(
     hooks = {cfg.seed: list(callbacks[i]) if callbacks else [] for i, cfg in enumerate(cfgs)}
     summaries: dict[int, dict[str, Any]] = {}
     for group in _groups(cfgs) if batched else [[c] for c in cfgs]:
-        reason = (
-            _batch_refusal(group[0], resolve_device(group[0].runtime.device))
-            if len(group) > 1
-            else ""
-        )
-        if reason:
-            print(f"farsighter: {reason}; these {len(group)} seeds train in turn", file=sys.stderr)
-        if reason or len(group) == 1:
+        device = resolve_device(group[0].runtime.device)
+        reason, images = _batch_refusal(group[0], device) if len(group) > 1 else ("", False)
+        if len(group) == 1 or (reason and (images or group[0].resume)):
+            if reason:  # an image replay is GBs: one in memory at a time
+                why = "image replays" if images else "a resume"
+                print(
+                    f"farsighter: {reason}; these {len(group)} seeds train in turn ({why})",
+                    file=sys.stderr,
+                )
             for cfg in group:
                 summaries[cfg.seed] = train(cfg, callbacks=hooks[cfg.seed])
             continue
-        device = resolve_device(group[0].runtime.device)
+        if reason:  # one agent per seed, stepped together by the one loop
+            print(
+                f"farsighter: {reason}; these {len(group)} seeds step together, each its own agent",
+                file=sys.stderr,
+            )
+            graphs_enabled(group[0].runtime.cuda_graph, device)  # refused as train refuses
+            check_compiler(group[0].runtime.compile, device)
         for summary in run_seeds(group, [hooks[c.seed] for c in group], device):
             summaries[summary["seed"]] = summary
     return [summaries[cfg.seed] for cfg in cfgs]
@@ -95,7 +104,7 @@ def train_seeds(
 def batchable(cfg: Config) -> bool:
     """Whether seeds of ``cfg`` train as one batch here (its agent has a seed-batched form for
     its spaces and settings)."""
-    return not _batch_refusal(cfg, resolve_device(cfg.runtime.device))
+    return not _batch_refusal(cfg, resolve_device(cfg.runtime.device))[0]
 
 
 def _groups(cfgs: Sequence[Config]) -> list[list[Config]]:
@@ -116,15 +125,19 @@ def _start_point(cfg: Config) -> Any:
     return checkpoint["loop"]["global_step"], tuple(sorted(counters.items()))
 
 
-def _batch_refusal(cfg: Config, device: torch.device) -> str:
-    module = algorithms.get(cfg.algo).seed_batch
-    if not module:  # said without building an environment
-        batched = ", ".join(algorithms.seed_batched())
-        return f"{cfg.algo} trains its seeds one at a time (batched: {batched})"
+def _batch_refusal(cfg: Config, device: torch.device) -> tuple[str, bool]:
+    """Why seeds of ``cfg`` cannot share one computation here ('' when they can), and whether
+    its observations are images."""
     probe = make_vector_env(cfg, seed=cfg.seed)
     try:
-        check_spaces(cfg.algo, probe.single_observation_space, probe.single_action_space)
+        space = probe.single_observation_space
+        check_spaces(cfg.algo, space, probe.single_action_space)
+        images = len(space.shape or ()) == 3
+        module = algorithms.get(cfg.algo).seed_batch
+        if not module:
+            batched = ", ".join(algorithms.seed_batched())
+            return f"{cfg.algo} has no seed-axis form (batched: {batched})", images
         batch = importlib.import_module(f"farsighter.agents.{module}")
-        return str(batch.supports(cfg, probe.single_observation_space, device))
+        return str(batch.supports(cfg, space, device)), images
     finally:
         probe.close()

@@ -231,6 +231,8 @@ def _same_states(alone: Any, batch: Any, where: str = "agent") -> None:
         assert len(alone) == len(batch), where
         for i, (a, b) in enumerate(zip(alone, batch, strict=True)):
             _same_states(a, b, f"{where}[{i}]")
+    elif dataclasses.is_dataclass(alone):  # a record (OB2I's episode): field by field
+        _same_states(vars(alone), vars(batch), where)
     elif isinstance(alone, float) and np.isnan(alone):
         assert np.isnan(batch), where
     else:
@@ -238,7 +240,8 @@ def _same_states(alone: Any, batch: Any, where: str = "agent") -> None:
 
 
 def test_settings_a_batch_cannot_take_train_alone(tmp_path: Path, tiny_config: Any) -> None:
-    """Farsighter's batch refuses what it does not batch, and the seeds then train in turn."""
+    """Farsighter's batch refuses what it does not stack (its seeds then step together, each its
+    own agent)."""
     base = tiny_config("farsighter", tmp_path, preset="general", blr__random_features=0)
     cfg = tiny_config("farsighter", tmp_path, preset="general", adaptive_k__enabled=True)
     assert "adaptive k" in farsighter_agent.supports(cfg, _box(), torch.device("cpu"))
@@ -249,6 +252,33 @@ def test_settings_a_batch_cannot_take_train_alone(tmp_path: Path, tiny_config: A
     image = gym.spaces.Box(0, 255, (4, 84, 84), np.uint8)
     assert "image" in farsighter_agent.supports(base, image, torch.device("cpu"))
     assert "ob2i" not in seed_batched() and not batchable(tiny_config("ob2i", tmp_path))
+
+
+@pytest.mark.parametrize(
+    ("algo", "env", "values"),
+    [
+        ("ob2i", "CartPole-v1", {}),  # no seed-axis form
+        ("naf", "Pendulum-v1", {"preset": "continuous", "batch_size": 16}),
+        ("farsighter", "CartPole-v1", {"adaptive_k__enabled": True, "k": 3}),  # refused
+    ],
+)
+def test_seeds_that_cannot_batch_step_together_each_as_it_runs_alone(
+    tmp_path: Path, tiny_config: Any, algo: str, env: str, values: dict[str, Any], capsys: Any
+) -> None:
+    """One agent per seed, stepped together by the one loop (``Each``): each seed's files and
+    agent are its run alone's."""
+    cfg = tiny_config(algo, tmp_path / "together", env=env, total_steps=800, **values)
+    assert not batchable(cfg)
+    train_seeds(seed_configs(cfg, (1, 2)))
+    assert "seeds step together" in capsys.readouterr().err
+    for seed in (1, 2):
+        alone_dir = tmp_path / f"alone{seed}"
+        train(dataclasses.replace(cfg, seed=seed, run_dir=str(alone_dir)))
+        together = tmp_path / "together" / f"s{seed}"
+        _same_states(
+            _agent_state(alone_dir / "checkpoint.pt"), _agent_state(together / "checkpoint.pt")
+        )
+        assert _files(alone_dir) == _files(together)
 
 
 def _box() -> gym.spaces.Box:

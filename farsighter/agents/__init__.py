@@ -17,7 +17,7 @@ from farsighter import algorithms
 from farsighter.agents.protocol import (
     Agent,
     AgentFactory,
-    Alone,
+    Each,
     LearningAgent,
     SeedAgents,
     SeedAgentsFactory,
@@ -29,7 +29,7 @@ from farsighter.networks import set_precision
 __all__ = [
     "Agent",
     "AgentFactory",
-    "Alone",
+    "Each",
     "LearningAgent",
     "SeedAgents",
     "build_agent",
@@ -65,7 +65,7 @@ def build_agent(
 def loop_class(algo: str) -> type:
     """The class whose ``act``, ``observe`` and ``learn`` the training loop calls for a run of
     ``algo`` alone: its agent written over the seed axis (``SEED_AGENTS``), else its ``AGENT``
-    (driven through :class:`Alone`)."""
+    (driven through :class:`Each`)."""
     module = _module(algo)
     return getattr(module, "SEED_AGENTS", None) or module.AGENT  # type: ignore[no-any-return]
 
@@ -84,22 +84,21 @@ def build_seed_agents(
     device: torch.device,
 ) -> SeedAgents:
     """The seeds of ``cfgs`` (one config but for seed and run directory) as the loop drives
-    them: the agent written over the seed axis where its module has one (``SEED_AGENTS``), one
-    agent alone (:class:`Alone`) for one config otherwise, else the algorithm's seed-batched
-    form (``Algorithm.seed_batch``; :func:`farsighter.seeds.train_seeds` checks it applies)."""
+    them: the agent written over the seed axis where its module has one (``SEED_AGENTS``) and
+    its ``supports`` takes these seeds' settings; else one agent per seed, stepped together
+    (:class:`Each`)."""
     spec = algorithms.get(cfgs[0].algo)
     if not isinstance(obs_space, gym.spaces.Box):  # farsighter.envs.check_spaces says why
         raise TypeError(f"{spec.name} needs a Box observation space, got {obs_space}")
     module = _module(spec.name)
-    if not hasattr(module, "SEED_AGENTS"):
-        if len(cfgs) == 1:
-            return Alone(
-                build_agent(cfgs[0], obs_space, act_space, frame_stack=frame_stack, device=device)
-            )
-        if not spec.seed_batch:
-            raise ValueError(f"{spec.name} has no seed-batched form")
-        module = importlib.import_module(f"farsighter.agents.{spec.seed_batch}")
-    factory: SeedAgentsFactory = module.SEED_AGENTS
+    factory: SeedAgentsFactory | None = getattr(module, "SEED_AGENTS", None)
+    if factory is None or (len(cfgs) > 1 and module.supports(cfgs[0], obs_space, device)):
+        return Each(
+            [
+                build_agent(c, obs_space, act_space, frame_stack=frame_stack, device=device)
+                for c in cfgs
+            ]
+        )
     agents = factory(cfgs, obs_space, act_space, frame_stack=frame_stack, device=device)
     for net in networks(agents):
         set_precision(net, cfgs[0].runtime.precision)

@@ -69,7 +69,7 @@ from farsighter.stacked import seed_network
 def supports(cfg: Config, obs_space: gym.Space | None, device: torch.device) -> str:
     """Why seeds of ``cfg`` cannot train as one batch here ('' when they can)."""
     if cfg.adaptive_k.enabled:
-        return "adaptive k trains its seeds one at a time (each seed's k moves on its own)"
+        return "adaptive k moves each seed's k on its own"
     return stack_refusal(cfg, obs_space)
 
 

@@ -85,26 +85,33 @@ class SeedAgents(Protocol):
         ...
 
 
-class Alone:
-    """One :class:`LearningAgent` as :class:`SeedAgents` of one seed: how a run alone, and each
-    seed of an algorithm without a seed-batched form, is trained."""
+class Each:
+    """S :class:`LearningAgent` s, one per seed, as :class:`SeedAgents`: how a run alone of an
+    agent without a seed-axis form is trained, and the generic form for seeds that cannot share
+    one computation (OB2I, NAF, image observations, bf16, compile, CUDA graphs, adaptive k):
+    the loop steps them together, each agent acting and learning on its own."""
 
-    seeds = 1
+    def __init__(self, agents: Sequence[LearningAgent]) -> None:
+        self.agents = list(agents)
 
-    def __init__(self, agent: LearningAgent) -> None:
-        self.agent = agent
+    @property
+    def seeds(self) -> int:
+        return len(self.agents)
 
     def act(self, obs_S: Sequence[np.ndarray], global_step: int) -> np.ndarray:
-        return self.agent.act(obs_S[0], global_step)[None]
+        return np.stack(
+            [agent.act(obs_E, global_step) for agent, obs_E in zip(self.agents, obs_S, strict=True)]
+        )
 
     def observe(self, steps: Sequence[VectorStep]) -> None:
-        self.agent.observe(steps[0])
+        for agent, step in zip(self.agents, steps, strict=True):
+            agent.observe(step)
 
     def learn(self, global_step: int) -> list[dict[str, torch.Tensor]]:
-        return [self.agent.learn(global_step)]
+        return [agent.learn(global_step) for agent in self.agents]
 
     def member(self, s: int) -> LearningAgent:
-        return self.agent
+        return self.agents[s]
 
 
 class Sole:

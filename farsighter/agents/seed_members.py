@@ -23,9 +23,9 @@ from farsighter.replay.seeds import OneSeedReplay, SeedReplay
 def stack_refusal(cfg: Config, obs_space: gym.Space | None) -> str:
     """Why networks of ``cfg`` on ``obs_space`` cannot be stacked ('' when they can)."""
     if not isinstance(obs_space, gym.spaces.Box) or len(obs_space.shape or ()) == 3:
-        return "image observations train their seeds one at a time (batched: flat observations)"
+        return "image observations do not stack (batched: flat observations)"
     if cfg.runtime.precision != "fp32" or cfg.runtime.compile or cfg.runtime.cuda_graph == "on":
-        return "precision bf16, compile and cuda_graph train their seeds one at a time"
+        return "precision bf16, compile and cuda_graph do not stack"
     return ""
 
 
