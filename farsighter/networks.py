@@ -283,7 +283,7 @@ def online_and_target(
         and online.precision == target.precision == "fp32"
     ):
         # The random layer is the same in both (buffers never trained, copied with the target):
-        # psi(s') once, the same numbers as two forwards (tests/test_random_features.py).
+        # psi(s') once, the same numbers as two forwards (tests/agents/test_random_features.py).
         psi = online.random_features(x)
         return online.body(x, psi), target.body(x, psi)
     return online(x, prepared=True), target(x, prepared=True)

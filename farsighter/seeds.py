@@ -11,7 +11,7 @@ another through :func:`farsighter.train.train`. Either way each seed is an ordin
 
 * its own run directory (``runs/<env>__<algo>__s<seed>``, or ``RUN_DIR/s<seed>`` under a given
   ``--run-dir``), with the files, checkpoints and summary a run alone writes;
-* on CPU the same numbers as the run alone, bit for bit (``tests/test_seeds.py``);
+* on CPU the same numbers as the run alone, bit for bit (``tests/training/test_seeds.py``);
 * resumable alone or in a batch: a checkpoint has the layout of the run alone, and a batch
   resumes its seeds in groups that stopped at the same step (a kill between two seeds' saves
   leaves them at different steps; each group then continues from its own).

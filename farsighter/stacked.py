@@ -7,7 +7,7 @@ alone: :class:`StackedLinear` runs ``x W^T + b`` forward and its three gradients
 same operand order as ``torch.nn.functional.linear`` and its autograd formula, and products too
 small for gemm go through ``F.linear`` seed by seed (:data:`SMALL_PRODUCT`), so on CPU a seed's
 outputs and gradients are bit-for-bit those of ``F.linear`` (checked over a grid of layer shapes
-in ``tests/test_seeds.py``).
+in ``tests/training/test_seeds.py``).
 
 A :class:`StackedQNetwork` is built from S :class:`farsighter.networks.QNetwork` s (each built
 under its own seed, so the initial weights are each seed's own) and hands back any seed's weights

@@ -5,7 +5,7 @@ Written once over a seed axis: S seeds of one config (S = 1 for a run alone) act
 learn as one computation. Each seed keeps what makes it that seed: its initial weights (built
 under its seed), its replay streams and their generator (seed + 1), its epsilon-greedy generator
 (seed + 2), its own loss, gradient clipping and optimizer state; on CPU each seed of a batch
-trains bit for bit as it trains alone (``tests/test_seeds.py``). Its networks are
+trains bit for bit as it trains alone (``tests/training/test_seeds.py``). Its networks are
 :func:`farsighter.stacked.seed_network`'s: one network alone for S = 1 (any architecture,
 precision, compiled or captured), stacked MLPs for S > 1. :meth:`DDQNAgent.member` is one seed
 seen as an agent, whose checkpoint is the one its run alone writes.

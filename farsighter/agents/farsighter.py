@@ -26,7 +26,7 @@ torso alone for S = 1, any architecture, precision, compiled or captured; stacke
 S > 1) and one optimizer step for every seed. The rest is each seed's own
 (:class:`~farsighter.agents.farsighter_parts.SeedParts`: posterior, draws, counters, generators,
 target cache), so on CPU each seed of a batch trains bit for bit as it trains alone
-(``tests/test_seeds.py``). Adaptive k, which moves each seed's k on its own, trains its seeds one
+(``tests/training/test_seeds.py``). Adaptive k, which moves each seed's k on its own, trains its seeds one
 at a time.
 """
 

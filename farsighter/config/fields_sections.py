@@ -29,7 +29,7 @@ class AtariConfig:
     backend: Literal["auto", "gymnasium", "envpool"] = "auto"
     """Training environments: envpool's C++ vector (pip install 'farsighter[envpool]'), the
     Gymnasium wrappers, or auto (envpool when installed, the game is there and noop_max >= 1).
-    Same preprocessing and step contract (tests/test_envpool_vec.py); no-op and sticky-action
+    Same preprocessing and step contract (tests/envs/test_envpool_vec.py); no-op and sticky-action
     draws come from each backend's own generators, so the same seed gives equally distributed
     but different starts. Evaluation always uses Gymnasium."""
     envpool_threads: int = 0

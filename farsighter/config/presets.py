@@ -142,7 +142,7 @@ PREVIOUS_GENERAL_FARSIGHTER: dict[str, Any] = {
     "blr.revisit_action": "uniform-timeout",
     "blr.center_sample": False,
 }
-# The cartpole preset's learning checks (tests/test_learning_slow.py) were measured with a draw
+# The cartpole preset's learning checks (tests/learning/test_learning_slow.py) were measured with a draw
 # held per episode; kept so that they stay what was measured.
 _CARTPOLE_PER_ALGO: dict[str, dict[str, Any]] = {
     "bdqn": {"blr.redraw": "episode"},
@@ -290,7 +290,7 @@ PRESETS: dict[str, Preset] = {
             "Control preset with a faster optimiser and shorter schedules for CartPole-sized "
             "tasks (our tuning; used by the learning checks and the README quick start).",
             "Farsighter tuning on CartPole-v1 (benchmarks/learning.py), with the general preset's "
-            "posterior (checked by tests/test_learning_slow.py); Adam as in CleanRL's "
+            "posterior (checked by tests/learning/test_learning_slow.py); Adam as in CleanRL's "
             "dqn.py classic-control defaults",
             per_algo=_CARTPOLE_PER_ALGO,
             values={

@@ -32,7 +32,7 @@ def epsilon_draws(
 ) -> tuple[np.ndarray, np.ndarray]:
     """``rng.random(n)``, then ``rng.integers(0, num_actions, size=n)``: the coins and random
     actions of epsilon-greedy. For one environment they are drawn as scalars, the same numbers
-    and the same generator state after (``tests/test_training.py``) at a fifth of the cost
+    and the same generator state after (``tests/training/test_training.py``) at a fifth of the cost
     (numpy's array path costs about 15 microseconds a call)."""
     if n == 1:
         coin, action = epsilon_draw(rng, num_actions)

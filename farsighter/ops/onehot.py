@@ -11,7 +11,7 @@ features of a minibatch cost a gemm of 400 times the work.
 :func:`gathered_linear` and :func:`stacked_gathered_linear` compute the layer from it. Callers
 use them only where the product's work is worth the check (:data:`MIN_WORK`) and where no
 gradient flows through this product's autograd (the seed-stacked layer keeps its own backward,
-which needs only x). ``tests/test_onehot.py`` checks the results equal ``F.linear`` bit for bit.
+which needs only x). ``tests/ops/test_onehot.py`` checks the results equal ``F.linear`` bit for bit.
 """
 
 from __future__ import annotations

@@ -220,7 +220,7 @@ class ReplayBuffer:
         """:meth:`add` for one stream and no device mirror (``scalar_add``): the rows of the
         array path written with scalar indices (its array operations cost about 60
         microseconds a step on a small task, more than its environment step;
-        tests/test_replay.py compares the two row for row)."""
+        tests/replay/test_replay.py compares the two row for row)."""
         term = bool(np.asarray(terminated_E).reshape(-1)[0])
         trunc = bool(np.asarray(truncated_E).reshape(-1)[0])
         self._write(

@@ -2,7 +2,7 @@
 
 Three seeds each, judged on the FINAL greedy evaluation (not the best one seen during training):
 the agent must have learned and kept it. The default suite's one learning check is
-``tests/test_learning.py``.
+``tests/learning/test_learning.py``.
 """
 
 from __future__ import annotations

@@ -12,7 +12,7 @@ import torch
 from farsighter.exploration import SCHEDULES
 from tests.conftest import parts, tiny
 
-DESIGN = Path(__file__).resolve().parent.parent / "docs" / "design.md"
+DESIGN = Path(__file__).resolve().parents[2] / "docs" / "design.md"
 
 
 def _example() -> str:

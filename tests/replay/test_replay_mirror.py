@@ -1,6 +1,6 @@
 """The replay's device mirror (Config.gpu_replay): stacks gathered from it equal the host's.
 
-The mirror is device-generic, so these checks run it on the CPU; tests/test_cuda_graph.py runs
+The mirror is device-generic, so these checks run it on the CPU; tests/agents/test_cuda_graph.py runs
 an agent with it on a GPU when one is present."""
 
 from __future__ import annotations

@@ -16,8 +16,8 @@ from farsighter.agents.farsighter_posterior import largest_reward_sum, replay_ro
 from farsighter.ops.blr import BLRHead
 from farsighter.ops.refit import REFIT_SLACK, ReplayRows, bellman_targets, refit
 from farsighter.replay import VectorStep
+from tests.agents.test_exploration_defaults import make_agent
 from tests.conftest import inner, parts
-from tests.test_exploration_defaults import make_agent
 
 GAMMA = 0.9
 

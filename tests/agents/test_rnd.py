@@ -17,7 +17,7 @@ from farsighter.config import make_config
 from farsighter.ops.running import RunningMeanStd
 from farsighter.replay import VectorStep
 from tests.conftest import GrabAgent, tiny
-from tests.test_replay import fill
+from tests.replay.test_replay import fill
 
 
 def _agent(tmp_path: Path, algo: str = "rnd", obs_dim: int = 4, **kw: Any) -> RNDAgent:

@@ -17,7 +17,7 @@ from gymnasium.envs.classic_control.cartpole import CartPoleEnv
 import farsighter
 from farsighter.config import make_config
 
-ROOT = Path(__file__).resolve().parents[1]
+ROOT = Path(__file__).resolve().parents[2]
 TINY: dict[str, Any] = {
     "preset": "control",
     "learning_starts": 100,

@@ -237,7 +237,7 @@ def test_track_gives_each_seed_of_a_batch_its_own_wandb_run(tmp_path: Path) -> N
 
 def readme_callback_example() -> str:
     """The README's callback example, without its last lines (the run it starts)."""
-    readme = (Path(__file__).resolve().parents[1] / "README.md").read_text()
+    readme = (Path(__file__).resolve().parents[2] / "README.md").read_text()
     blocks = re.findall(r"```python\n(.*?)```", readme, flags=re.DOTALL)
     (block,) = [b for b in blocks if "farsighter.BaseCallback" in b]
     return block.split("\ncfg = ")[0]

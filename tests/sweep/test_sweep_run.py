@@ -150,7 +150,7 @@ def test_bad_sweep_files_are_one_line_and_exit_2(
     assert not (tmp_path / "o").exists()
 
 
-SWEEPS = sorted((Path(__file__).resolve().parent.parent / "benchmarks" / "sweeps").glob("*.toml"))
+SWEEPS = sorted((Path(__file__).resolve().parents[2] / "benchmarks" / "sweeps").glob("*.toml"))
 
 
 @pytest.mark.parametrize("file", SWEEPS, ids=[f.stem for f in SWEEPS])

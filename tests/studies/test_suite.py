@@ -38,7 +38,7 @@ from farsighter.studies.suite import (
 )
 from farsighter.studies.suite_file import SETS, SUITE_FILE, load_suite
 
-ROOT = Path(__file__).resolve().parent.parent
+ROOT = Path(__file__).resolve().parents[2]
 
 SELECTION = {
     "distractor": {"farsighter/DistractorCorridor-v0": 10_000},

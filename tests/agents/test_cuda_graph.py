@@ -2,7 +2,7 @@
 
 On any machine: what a captured step relies on (the tensors it reads between updates are updated
 in place, never rebound), the config rules and the optimizer's capturable flag. With a CUDA
-device (the GPU benchmark machine; ``pytest tests/test_cuda_graph.py``): a graphed agent makes
+device (the GPU benchmark machine; ``pytest tests/agents/test_cuda_graph.py``): a graphed agent makes
 the same updates as an eager one, through target copies, posterior refreshes and a checkpoint
 load.
 """
@@ -23,15 +23,15 @@ from farsighter.agents.cuda_graph import graphs_enabled, set_capturable
 from farsighter.config import validate
 from farsighter.errors import ConfigError
 from farsighter.ops.blr import BLRHead
+from tests.agents.test_farsighter_agent import feed as _feed
 from tests.conftest import inner, parts, tiny
-from tests.test_farsighter_agent import feed as _feed
 
 CUDA = torch.cuda.is_available()
 
 
 def _agent(tmp_path: Path, algo: str, device: str = "cpu", **kw: Any) -> Any:
     # eager agents without the target cache, so that eager and graphed updates compare alike
-    # (the cache against none: tests/test_target_cache.py)
+    # (the cache against none: tests/replay/test_target_cache.py)
     kw.setdefault("target_cache", "off")
     cfg = tiny(algo, tmp_path, learning_starts=0, device=device, **kw)
     env = gym.make("CartPole-v1")

@@ -936,7 +936,7 @@ def _chain8_runs(tmp_path: Path, variants: dict[str, dict], steps: int) -> dict[
     """The agent state at the end of a general-preset Farsighter run on the chain L = 8 (seed
     3, k = 3) per named variant of its config, each in its own directory under ``tmp_path``."""
     from farsighter.train import train
-    from tests.test_seeds import _agent_state
+    from tests.training.test_seeds import _agent_state
 
     runs = {}
     for name, extra in variants.items():
@@ -961,7 +961,7 @@ def test_stay_optimism_false_is_the_default_run_where_every_step_moves(tmp_path:
     """On the chain every step moves the agent or ends the episode (no bootstrap), so a run with
     blr.stay_optimism True is session 45's default run (False) bit for bit (1,500
     steps, through its first reward and the switch)."""
-    from tests.test_seeds import _files, _same_states
+    from tests.training.test_seeds import _files, _same_states
 
     old = PREVIOUS_GENERAL_FARSIGHTER  # session 45's default, whose switch this is
     variants = {"plain": dict(old), "moves": {**old, "blr.stay_optimism": True}}
@@ -975,7 +975,7 @@ def test_cut_records_where_the_draw_chose_otherwise_than_the_mean(tmp_path: Path
     """k_target cut: the replay flags exactly the training actions that differ from the
     posterior mean's greedy action (every uniform action before learning_starts), and cuts its
     windows there; evaluation actions record nothing. A seed batch takes it (its runs are
-    those alone: tests/test_seeds.py)."""
+    those alone: tests/training/test_seeds.py)."""
     from farsighter.agents.farsighter import supports
     from farsighter.replay.buffer import EXPLORATORY
 
@@ -1035,7 +1035,7 @@ def test_until_reward_then_cut_is_the_default_run_until_the_first_reward(tmp_pat
     bit for bit (it records its exploratory actions beside the same rows): the chain L = 8 pays
     nothing in the first 400 steps of seed 3."""
     from farsighter.replay.buffer import EXPLORATORY
-    from tests.test_seeds import _files, _same_states
+    from tests.training.test_seeds import _files, _same_states
 
     # the defaults (switch): until-reward, then cut
     old = PREVIOUS_GENERAL_FARSIGHTER  # session 45's default, whose switch this is

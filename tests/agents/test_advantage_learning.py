@@ -14,8 +14,8 @@ from farsighter.agents.farsighter_targets import TensorBatch
 from farsighter.config import make_config, validate
 from farsighter.errors import ConfigError
 from farsighter.ops.targets import advantage_learning
+from tests.agents.test_exploration_defaults import make_agent
 from tests.conftest import inner, parts
-from tests.test_exploration_defaults import make_agent
 
 
 def _iterate(alpha: float, gamma: float = 0.9, sweeps: int = 3_000) -> np.ndarray:
@@ -110,7 +110,7 @@ def test_the_switch_makes_the_learner_capture_the_update_again(
 ) -> None:
     """A captured CUDA graph replays the branches taken at capture, and the calibrated loss
     branches where its inputs need not show it (mean targets before and after the switch): the
-    switch makes the learner capture again (tests/test_cuda_graph.py checks the updates on a
+    switch makes the learner capture again (tests/agents/test_cuda_graph.py checks the updates on a
     GPU)."""
     agent = make_agent(tmp_path, **{"preset": "general", "blr.target": "mean", "k_target": "k"})
     forgotten = []

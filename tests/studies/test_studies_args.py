@@ -17,7 +17,7 @@ from farsighter.errors import ConfigError, FarsighterError
 from farsighter.studies import maze, robotics
 from farsighter.studies.runner import Agent, Study, check, out_dir, parse, settings_from
 
-ROOT = Path(__file__).resolve().parents[1]
+ROOT = Path(__file__).resolve().parents[2]
 
 
 def _resolved(study: Study, line: str) -> tuple[object, Path]:

@@ -10,8 +10,8 @@ import pytest
 import torch
 
 from farsighter.replay.target_cache import TargetCache
+from tests.agents.test_farsighter_agent import feed, make_agent
 from tests.conftest import inner, parts
-from tests.test_farsighter_agent import feed, make_agent
 
 
 def _net_rows(e_B: np.ndarray, l_B: np.ndarray) -> torch.Tensor:

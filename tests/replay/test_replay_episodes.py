@@ -5,7 +5,7 @@ import numpy as np
 import pytest
 
 from farsighter.replay import ReplayBuffer
-from tests.test_replay import fill
+from tests.replay.test_replay import fill
 
 
 def bounds(buf: ReplayBuffer) -> list[tuple[int, int, int]]:

@@ -44,7 +44,7 @@ def _train(
 def test_defaults_take_the_drifting_lock_they_found(tmp_path: Path) -> None:
     """L = 8, seed 1 (8,000 steps): the defaults end on the path (greedy return 0.99, the
     reward less the move cost); keeping the targets at the switch (the default before) ends at 0
-    on this seed (tests/test_drift_chain.py::test_kept_targets_lose_the_drifting_lock, slow)."""
+    on this seed (tests/envs/test_drift_chain.py::test_kept_targets_lose_the_drifting_lock, slow)."""
     summary = _train(tmp_path, 8, 1)
     assert summary["final_eval_return"] == pytest.approx(0.99)
     assert summary["mean_recent_return"] > 0.2  # the lock is taken in training, not just found

@@ -13,7 +13,7 @@ from farsighter.cli import train_config
 from farsighter.config import make_config, save_config
 from farsighter.errors import ConfigError, RunDirError
 from farsighter.train import train
-from tests.test_cli import run_cli
+from tests.interface.test_cli import run_cli
 
 FIRST = [
     "--algo",

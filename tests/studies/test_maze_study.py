@@ -31,7 +31,7 @@ from farsighter.studies.maze import (
 )
 from farsighter.studies.runner import parse, settings_from
 
-RESULTS = Path(__file__).resolve().parents[1] / "docs" / "results" / "maze"
+RESULTS = Path(__file__).resolve().parents[2] / "docs" / "results" / "maze"
 
 # The shared settings of every maze agent as maze.py held them before they became the `maze`
 # preset (the pre-refactor truth, on top of the `control` preset).

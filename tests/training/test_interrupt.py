@@ -20,8 +20,8 @@ from farsighter.errors import Interrupted
 from farsighter.interrupt import requested, stop_on_signal
 from farsighter.rundir import CHECKPOINT_FILE
 from tests.conftest import tiny
-from tests.test_cli import run_cli
-from tests.test_training import metric_rows, weights
+from tests.interface.test_cli import run_cli
+from tests.training.test_training import metric_rows, weights
 
 
 def _default_sigint() -> None:

@@ -16,9 +16,9 @@ from farsighter import make_config
 from farsighter.agents.cuda_graph import check_compiler
 from farsighter.config import validate
 from farsighter.errors import ConfigError
+from tests.agents.test_cuda_graph import _agent, _params
+from tests.agents.test_farsighter_agent import feed as _feed
 from tests.conftest import inner, parts
-from tests.test_cuda_graph import _agent, _params
-from tests.test_farsighter_agent import feed as _feed
 
 
 def test_compile_setting_is_checked(monkeypatch: pytest.MonkeyPatch) -> None:
