@@ -148,7 +148,8 @@ def profile_one(
     import torch
 
     import farsighter.seeds as seeds_module
-    import farsighter.train as train_module
+    # the module (farsighter.train the attribute is the function the package exports)
+    train_module = importlib.import_module("farsighter.train")
     from benchmarks.small_profile import phase_timer
     from farsighter import algorithms
     from farsighter.session import RunLog
