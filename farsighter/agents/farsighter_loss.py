@@ -112,6 +112,14 @@ class FarsighterLoss:
         """Each seed's y of Eq. 8 on its rows of the minibatch ``t`` (``inputs``: its draws, the
         cached target features, and the one-step windows' ``one_*`` fields where a seed's
         ``k_target`` compares them), advantage learning applied where a seed is calibrated."""
+        return [y_B for _, _, y_B in self.seed_targets(t, inputs)]
+
+    @torch.no_grad()
+    def seed_targets(
+        self, t: TensorBatch, inputs: Tensors
+    ) -> list[tuple[TensorBatch, Targets, torch.Tensor]]:
+        """:meth:`targets`, with each seed's rows and its advantage-learning map (:meth:`gaps`),
+        which the statistics of incremental mode reuse."""
         features = {
             prefix: self.next_features(
                 inputs[prefix + "next_obs_B"], inputs.get(prefix + "phi_next_target_BD")
@@ -120,7 +128,7 @@ class FarsighterLoss:
             if prefix + "next_obs_B" in inputs
         }
         gaps = self.gaps(t)
-        ys = []
+        out = []
         for s, p in enumerate(self.parts):
             mine, draws = self.seed_inputs(inputs, s)
             t_s = TensorBatch.of(mine)
@@ -129,8 +137,8 @@ class FarsighterLoss:
             if "one_" in features and uses_one_step(p.k_target):  # same s and a: s', r, gamma
                 one_nxt = (features["one_"][0][s], features["one_"][1][s])
                 one = (one_step_batch(t_s, mine), one_step_draws(draws), one_nxt)
-            ys.append(gaps[s](p.targets(t_s, draws, nxt, one)))
-        return ys
+            out.append((t_s, gaps[s], gaps[s](p.targets(t_s, draws, nxt, one))))
+        return out
 
     @torch.no_grad()
     def gaps(self, t: TensorBatch) -> list[Targets]:
@@ -162,12 +170,11 @@ class FarsighterLoss:
         features and regression targets, which the posterior's statistics add
         (``phi_BD@s``, ``y_post_B@s``)."""
         t = TensorBatch.of(inputs)
-        ys = self.targets(t, inputs)
+        seeds = self.seed_targets(t, inputs)
         phi_S = self.torso.each_seed(t.obs_B)
-        actions_S = self.torso.by_seed(t.actions_B)
         losses = [
-            td_loss(q_taken(phi_S[s], p.head.mean_AD, actions_S[s]), ys[s], self.kind)
-            for s, p in enumerate(self.parts)
+            td_loss(q_taken(phi_S[s], p.head.mean_AD, t_s.actions_B), y_B, self.kind)
+            for s, (p, (t_s, _, y_B)) in enumerate(zip(self.parts, seeds, strict=True))
         ]
         loss_S = torch.stack(losses)
         out = {"loss": losses[0] if self.S == 1 else loss_S.sum(), "loss_S": loss_S.detach()}
@@ -175,12 +182,9 @@ class FarsighterLoss:
             posterior = None  # max (the BDQN code's regression): the target torso's values
             if self.parts[0].cfg.blr.posterior_target != "double":
                 posterior = online_and_target_seeds(self.torso_target, None, t.next_obs_B)[0]
-                gaps = self.gaps(t)
-            for s, p in enumerate(self.parts):
+            for s, (p, (t_s, gap, y_B)) in enumerate(zip(self.parts, seeds, strict=True)):
                 out[seed_key("phi_BD", s)] = phi_S[s].detach()
-                y_B = ys[s]
                 if posterior is not None:
-                    t_s = TensorBatch.of(self.seed_inputs(inputs, s)[0])
-                    y_B = gaps[s](max_targets(t_s, posterior[s], p.target_mean_AD))
+                    y_B = gap(max_targets(t_s, posterior[s], p.target_mean_AD))
                 out[seed_key("y_post_B", s)] = y_B
         return out
