@@ -61,8 +61,8 @@ class BLRConfig:
     DoorKey-6x6: turning left and right in one cell, or a pick up that changes nothing, to the
     time limit). The random action breaks the loop where a redraw from a narrow posterior
     repeats it. A task whose observations never repeat within an episode (continuous states,
-    deep sea, the chain) runs as without it, bit for bit. The general preset's Farsighter:
-    uniform-timeout (session 42). Our extension."""
+    deep sea, the chain) runs as without it, bit for bit. Session 45's general preset
+    set uniform-timeout. Our extension."""
     target: Literal["mean", "thompson", "sample", "sample-greedy"] = "mean"
     """Value of the next state in the Q-loss target. mean: argmax and value under the posterior
     mean (Eq. 8). thompson: argmax under the latest acting Thompson draw, one weight set for the
@@ -118,8 +118,8 @@ class BLRConfig:
     which deep sea pays for by bsuite's criterion (N = 20: prior 3/5, none 4/5, refit 4/5);
     refit takes the found path at once; on Taxi its fit overestimates (targets up to 46.7
     where no reward sum exceeds 20) and is dropped, as the unchecked fit's greedy policy
-    repeated illegal pickups (final evaluation -736 to -911 against -200). refit-zero (the
-    general preset's, for Farsighter): refit, but where the fit is dropped the rows stay
+    repeated illegal pickups (final evaluation -736 to -911 against -200). refit-zero (session
+    45's general preset's): refit, but where the fit is dropped the rows stay
     without their targets (``zero-targets``) instead of the restart from the prior: MiniGrid
     DoorKey-5x5 (its fit rejected) 2/5 with ``stay_optimism`` False and ``cut_delay`` 3, 0/5
     with refit (docs/design.md "The refit where it is sound, the targets zeroed where it is
@@ -134,8 +134,8 @@ class BLRConfig:
     held draw repeats it (DoorKey-5x5: docs/design.md); posterior sampling over a whole value
     function pays no such bonus for a self-loop. On a task whose every step moves the agent or
     ends the episode (the chain, tested; deep sea) a run is the run with True bit for bit.
-    DoorKey-5x5 with it: 0/3 (docs/design.md). The general preset's Farsighter: False (with
-    ``switch_restart`` refit-zero and ``cut_delay`` 3, session 40). Our extension."""
+    DoorKey-5x5 with it: 0/3 (docs/design.md). Session 45's general preset set False (with
+    ``switch_restart`` refit-zero and ``cut_delay`` 3). Our extension."""
     rearm_episodes: int = 0
     """With ``optimism = until-reward``: after this many episodes in a row that paid no positive
     reward since the switch, the targets' optimism again, until the next positive reward
@@ -161,7 +161,8 @@ class BLRConfig:
     what the values resolve, and cutting there shrinks every window to a step; a move that
     ends the episode short of the reward (the chain's) costs all of V and is cut at once. 0:
     wherever the draw and the mean differ (with ``cut_margin`` 0, Watkins). The general
-    preset's Farsighter: 3 (session 40; the chain L = 30 held 5/5 with it). Our extension."""
+    preset's Farsighter: 3, with ``Config.k_target = cut`` (selection IQM 0.99 [0.97, 1.00]
+    against 0.91 [0.87, 0.94] at 0; docs/results/suite/comparisons/cut-target). Our extension."""
     advantage_learning: float = 0.0
     """With ``optimism = until-reward``, after its switch: alpha of the advantage-learning
     operator (Baird 1999; Bellemare et al. 2016, "Increasing the Action Gap"), every target
@@ -171,8 +172,8 @@ class BLRConfig:
     (1 - gamma) V (a turn, a pick up that changes nothing, a walk into a wall: about 0.01 V at
     gamma = 0.99), a gap below what the values resolve, the posterior mean's greedy policy can
     repeat such a step to the time limit while the draws, which move, get through. 0: off;
-    with ``optimism = always`` there is no switch, so it never acts. The general preset's
-    Farsighter: 0.9 (session 41). Our extension, from the paper's operator."""
+    with ``optimism = always`` there is no switch, so it never acts. Session 45's general
+    preset set 0.9. Our extension, from the paper's operator."""
     target_noise_scale: float = 1.0
     """With target = sample or sample-greedy: a factor on the draw added to the next state's value
     (1: the posterior's own width). The draw's upward bias (the largest of the actions' draws,

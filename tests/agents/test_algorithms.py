@@ -146,7 +146,7 @@ def test_presets_with_algo_prints_the_resolved_values_and_their_source(
     out = capsys.readouterr().out
     assert "resolves to general" in out
     lines = {line.split("=")[0].strip(): line for line in out.splitlines() if "=" in line}
-    assert "'k'" in lines["k_target"] and "(preset general, for farsighter)" in lines["k_target"]
+    assert "'cut'" in lines["k_target"] and "(preset general, for farsighter)" in lines["k_target"]
     assert (
         "'k'" in lines["blr.redraw"] and "(preset general, for farsighter)" in lines["blr.redraw"]
     )

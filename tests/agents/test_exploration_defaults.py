@@ -601,7 +601,8 @@ def test_auto_gives_discrete_tasks_the_general_preset_and_keeps_table_1_selectab
         100,
         "residual",
     )
-    assert (cfg.blr.target, cfg.blr.redraw, cfg.k_target, cfg.k) == ("sample", "k", "k", 10)
+    assert (cfg.blr.target, cfg.blr.redraw, cfg.k_target, cfg.k) == ("sample", "k", "cut", 10)
+    assert cfg.blr.cut_delay == 3.0 and cfg.blr.cut_margin == 0.0
     assert (cfg.blr.random_features, cfg.blr.data_weight) == (0, 100.0)
     assert cfg.blr.center_sample and cfg.blr.random_features_max == 0
     assert make_config("bdqn", "farsighter/Chain10-v0").blr.random_features_max == 0
@@ -638,7 +639,7 @@ def test_auto_gives_discrete_tasks_the_general_preset_and_keeps_table_1_selectab
     paper = make_config("farsighter", "farsighter/Chain10-v0", preset="control")
     assert tuple(getattr(paper, f) for f in learner[:5]) == ("rmsprop", 0.0025, 4, 32, 1_000)
     assert paper.sample_recent is True  # Algorithm 1 line 4 under the paper's presets
-    assert "general" in PRESETS and PRESETS["general"].per_algo["farsighter"]["k_target"] == "k"
+    assert "general" in PRESETS and PRESETS["general"].per_algo["farsighter"]["k_target"] == "cut"
     # the chosen default sets none of session 45's other extensions (the suite's ablations)
     defaults = make_config("farsighter", "farsighter/Chain10-v0")
     bdqn = make_config("bdqn", "farsighter/Chain10-v0")
