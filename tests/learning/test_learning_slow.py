@@ -98,8 +98,10 @@ def test_farsighter_solves_the_bridge_maze(tmp_path: Path, seed: int) -> None:
 # evaluation -2000, the evaluation's cap), measured in session 49. Session 45's default (the
 # fourteen settings of PREVIOUS_GENERAL_FARSIGHTER) walked the shortest path from 10k (seed 1) and
 # 15k (seed 2); DDQN's defaults from 15k (seed 1). CliffWalking is in none of the suite's sets: a
-# held-out task on which the default regressed (issue #62).
-REGRESSED = known_failure("the session-47 default never reaches the goal in 20k steps (measured)")
+# held-out task on which the default regressed (issue #62). Session 50's default (the k-step return
+# cut where the mean sees a move costing more than 3 steps) does not walk the -13 path at 20k
+# either (seeds 1, 2, 3; this test, 3 xfailed).
+REGRESSED = known_failure("the general default does not walk the shortest path in 20k steps")
 
 
 @pytest.mark.parametrize("seed", [pytest.param(s, marks=REGRESSED) for s in SEEDS])
