@@ -607,6 +607,10 @@ def test_auto_gives_discrete_tasks_the_general_preset_and_keeps_table_1_selectab
     assert cfg.blr.center_sample and cfg.blr.random_features_max == 0
     assert make_config("bdqn", "farsighter/Chain10-v0").blr.random_features_max == 0
     assert make_config("bdqn", "farsighter/Chain10-v0").blr.data_weight == 1.0  # Farsighter's
+    # RND's bonus weight chosen on the suite (comparisons/rnd-weight); the paper's elsewhere
+    assert make_config("rnd", "farsighter/Chain10-v0").rnd.intrinsic_weight == 0.1
+    assert make_config("krnd", "farsighter/Chain10-v0").rnd.intrinsic_weight == 0.5
+    assert make_config("rnd", "ALE/Pong-v5").rnd.intrinsic_weight == 0.5
     cartpole = make_config("farsighter", "CartPole-v1", preset="cartpole")  # as measured
     assert (cartpole.blr.redraw, cartpole.k_target) == ("episode", "max")
     bdqn = make_config("bdqn", "CartPole-v1")
