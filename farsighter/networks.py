@@ -110,62 +110,33 @@ def _linear(x: torch.Tensor, weight: torch.Tensor, bias: torch.Tensor) -> torch.
     return F.linear(x, weight, bias) if hot is None else gathered_linear(hot, weight, bias)
 
 
-RandomFeatureKind = Literal["relu", "fourier"]
-
-FOURIER_LENGTHSCALE = 0.5
-"""The Fourier features' lengthscale l (W ~ N(0, 1 / l^2)): their kernel is
-exp(-||s - s'||^2 / (2 l^2)), so two one-hot observations (||s - s'||^2 = 2) have correlation
-exp(-1 / l^2) = 0.018, nearly none, and a unit step in one coordinate of a flat observation
-exp(-1 / (2 l^2)) = 0.14."""
-
-
-def random_feature_map(pre: torch.Tensor, kind: RandomFeatureKind, width: int) -> torch.Tensor:
-    """psi from the random layer's pre-activations ``pre`` = W s + b, in place: relu(pre) /
-    sqrt(width), or sqrt(2 / width) cos(pre) (random Fourier features)."""
-    if kind == "relu":
-        return pre.relu_().div_(math.sqrt(width))
-    return pre.cos_().mul_(math.sqrt(2.0 / width))
+def random_feature_map(pre: torch.Tensor, width: int) -> torch.Tensor:
+    """psi = relu(pre) / sqrt(width) from the random layer's pre-activations ``pre`` = W s + b,
+    in place."""
+    return pre.relu_().div_(math.sqrt(width))
 
 
 class RandomFeatureTorso(Torso):
     """A flat torso's learned features followed by ``width`` fixed random features of the
     observation, drawn once and never trained (buffers: saved, loaded and copied to the target
-    with the weights):
-
-    * ``relu``: psi(s) = relu(W s + b) / sqrt(width), W and b standard normal;
-    * ``fourier``: psi(s) = sqrt(2 / width) cos(W s + b), W ~ N(0, 1 / l^2) and b uniform on
-      [0, 2 pi) (random Fourier features of the Gaussian kernel of lengthscale
-      l = ``FOURIER_LENGTHSCALE``, Rahimi & Recht 2007).
+    with the weights): psi(s) = relu(W s + b) / sqrt(width), W and b standard normal.
 
     A Bayesian linear head over learned features alone is equally certain everywhere: every
     step adds precision to the few directions the features share (docs/design.md, "Why deep sea
     N = 20 is not found"). Over these features two observations far apart have directions of
     their own, so the posterior stays wide where the run has not been and narrows where it has:
     uncertainty about states, as the random prior functions of Osband et al. (2018) give an
-    ensemble. How much of a new state's psi is its own differs by kind: on deep sea's one-hot
-    cells the ReLU features share a large common part (the bias and the ReLU's mean), the
-    Fourier features almost none (``benchmarks/results/feature_novelty_fourier_s26.json``, made
-    by benchmarks/feature_novelty.py, deleted after commit c5d8fda; docs/design.md, "Why a fixed
-    random layer runs out at depth")."""
+    ensemble (docs/design.md, "Why a fixed random layer runs out at depth")."""
 
     rf_weight: torch.Tensor
     rf_bias: torch.Tensor
 
-    def __init__(
-        self, torso: MLPTorso, obs_dim: int, width: int, kind: RandomFeatureKind = "relu"
-    ) -> None:
+    def __init__(self, torso: MLPTorso, obs_dim: int, width: int) -> None:
         super().__init__()
         self.torso = torso
         self.width = width
-        self.kind: RandomFeatureKind = kind
-        weight = torch.randn(width, obs_dim)
-        if kind == "relu":
-            bias = torch.randn(width)
-        else:
-            weight.div_(FOURIER_LENGTHSCALE)
-            bias = torch.rand(width).mul_(2 * math.pi)
-        self.register_buffer("rf_weight", weight)
-        self.register_buffer("rf_bias", bias)
+        self.register_buffer("rf_weight", torch.randn(width, obs_dim))
+        self.register_buffer("rf_bias", torch.randn(width))
         self.out_dim = torso.out_dim + width
 
     def prepare(self, obs_BO: torch.Tensor) -> torch.Tensor:
@@ -173,7 +144,7 @@ class RandomFeatureTorso(Torso):
 
     def random_features(self, x: torch.Tensor) -> torch.Tensor:
         """psi(s) of prepared observations, (B, width). In place: nothing in it is trained."""
-        return random_feature_map(_linear(x, self.rf_weight, self.rf_bias), self.kind, self.width)
+        return random_feature_map(_linear(x, self.rf_weight, self.rf_bias), self.width)
 
     def body(self, x: torch.Tensor, psi: torch.Tensor | None = None) -> torch.Tensor:
         """[learned features, psi(s)]; ``psi`` when already computed (by a torso of the same

@@ -27,7 +27,6 @@ from torch import nn
 from farsighter.networks import (
     MLPTorso,
     QNetwork,
-    RandomFeatureKind,
     RandomFeatureTorso,
     online_and_target,
     random_feature_map,
@@ -200,9 +199,6 @@ class StackedQNetwork(nn.Module):
         # a torso: features, no linear head
         self.relu_last = isinstance(first, MLPTorso | RandomFeatureTorso)
         self.rf_width = first.width if isinstance(first, RandomFeatureTorso) else 0
-        self.rf_kind: RandomFeatureKind = (
-            first.kind if isinstance(first, RandomFeatureTorso) else "relu"
-        )
         self.buffer_names: list[str] = []
         if self.rf_width:  # each seed's random layer, drawn under its own seed (never trained)
             for name in ("rf_weight", "rf_bias"):
@@ -278,7 +274,7 @@ class StackedQNetwork(nn.Module):
         ``hot``: the rows' :func:`one_hot_rows`, when known."""
         with torch.no_grad():
             psi = stacked_linear(x_SBO, self.rf_weight, self.rf_bias, hot)
-        return random_feature_map(psi, self.rf_kind, self.rf_width)
+        return random_feature_map(psi, self.rf_width)
 
     def member_forward(self, obs_B: torch.Tensor, s: int) -> torch.Tensor:
         """Seed ``s``'s network alone on ``obs_B`` (B rows): the operations of its QNetwork or
@@ -293,7 +289,7 @@ class StackedQNetwork(nn.Module):
                 x = torch.relu(x)
         if self.rf_width:
             psi = F.linear(inputs, self.rf_weight[s], self.rf_bias[s])
-            return torch.cat([x, random_feature_map(psi, self.rf_kind, self.rf_width)], dim=1)
+            return torch.cat([x, random_feature_map(psi, self.rf_width)], dim=1)
         return x
 
     def member_state(self, s: int) -> dict[str, torch.Tensor]:

@@ -127,10 +127,9 @@ class FarsighterAgent:
             parts = list(enumerate(self.parts))
             actions = [p.exploration.actions(phi_S[s], obs_S[s], p.gen) for s, p in parts]
             if self.cut:  # where a seed's draw chose otherwise than its mean would
-                margin, rel = self.cfg.blr.cut_margin, optimism.cut_relative(self.cfg)
-                mark = optimism.exploratory_actions
+                rel, mark = optimism.cut_relative(self.cfg), optimism.exploratory_actions
                 self.exploratory_SE = np.stack(
-                    [mark(p.head, phi_S[s], actions[s], margin, rel) for s, p in parts]
+                    [mark(p.head, phi_S[s], actions[s], rel) for s, p in parts]
                 )
         return torch.stack(actions).cpu().numpy()
 
@@ -138,17 +137,16 @@ class FarsighterAgent:
         """One vector step of every seed, in seed order."""
         self.replay.add_steps(steps, self.exploratory_SE if self.cut else None)
         for s, (p, st) in enumerate(zip(self.parts, steps, strict=True)):
+            if optimism.switch_at(self.cfg, p.calibrated, st.reward_E):
+                self.calibrate(s)
             done = np.logical_or(st.terminated_E, st.truncated_E)
-            turn, p.unpaid = optimism.switch_at(self.cfg, p.calibrated, p.unpaid, st.reward_E, done)
-            if turn is not None:
-                self.calibrate(s, on=turn)
             p.exploration.observe(done, st.reward_E, st.truncated_E)
 
     def calibrate(self, s: int = 0, restart: bool = True, on: bool = True) -> None:
         """Seed ``s``'s ``blr.optimism = until-reward`` switch (:meth:`SeedParts.calibrate`):
         its streams cut their windows from now on where its calibrated target is cut, and its
         posterior restarts (``blr.switch_restart``; ``restart = False``: a checkpoint's
-        statistics, loaded, are kept). ``on = False``: back to the optimism (rearmed)."""
+        statistics, loaded, are kept). ``on = False``: back to the optimism."""
         p, streams = self.parts[s], self.replay.seed_streams(s)
         p.calibrate(on)
         self.learner.forget_graphs()  # the calibrated loss branches (blr.advantage_learning)

@@ -43,7 +43,7 @@ class SeedParts:
         self.cfg = cfg
         # the targets (blr.target, k_target), which blr.optimism until-reward switches
         self.blr, self.k_target = cfg.blr, cfg.k_target
-        self.calibrated, self.unpaid = False, 0  # blr.optimism's switch, blr.rearm_episodes
+        self.calibrated = False  # blr.optimism's switch
         self.head = make_head(cfg, num_actions, dim, init_AD, device)
         self.target_mean_AD = self.head.mean_AD.clone()  # moved by the target copy alone
         self.counters = FarsighterCounters(k=cfg.k)
@@ -60,7 +60,7 @@ class SeedParts:
     def calibrate(self, on: bool = True) -> None:
         """``blr.optimism = until-reward``'s switch: from now on the posterior mean and the
         k-step target alone (no draw, no max with the one-step target; cut at exploratory
-        actions where ``k_target = cut``); ``on = False``: the optimism again (rearmed)."""
+        actions where ``k_target = cut``); ``on = False``: the optimism again."""
         self.calibrated = on
         self.blr, self.k_target = calibrated(self.cfg.blr, self.cfg.k_target, on)
 
@@ -197,8 +197,6 @@ class FarsighterMember(Member):
         }
         if self.cfg.blr.optimism != "always":  # the switch
             state["calibrated"] = p.calibrated
-        if self.cfg.blr.rearm_episodes:
-            state["unpaid"] = p.unpaid
         return state
 
     def load_state_dict(self, state: dict[str, Any]) -> None:
@@ -217,7 +215,6 @@ class FarsighterMember(Member):
         p.recent_phi.load_state_dict(state["recent_phi"])
         if state.get("calibrated", False) and not p.calibrated:
             b.calibrate(s, restart=False)
-        p.unpaid = state.get("unpaid", 0)
         # a checkpoint from before the exploration object holds its pieces under our own keys
         p.exploration.load_state_dict(state.get("exploration", state))
         if p.cache is not None:  # the rows it keeps, when the checkpoint has them

@@ -76,7 +76,7 @@ def seeded_torso(
         if cfg.blr.random_features and isinstance(torso, MLPTorso):  # images: learned alone
             entries = int(np.prod(obs_space.shape))
             width = cfg.blr.random_feature_width(entries)
-            torso = RandomFeatureTorso(torso, entries, width, cfg.blr.random_features_kind)
+            torso = RandomFeatureTorso(torso, entries, width)
         return torso, nn.Linear(torso.out_dim, num_actions, bias=False).weight.detach()
 
     return build_seeded(cfg.seed, build)  # type: ignore[no-any-return]

@@ -136,23 +136,6 @@ class BLRConfig:
     ends the episode (the chain, tested; deep sea) a run is the run with True bit for bit.
     DoorKey-5x5 with it: 0/3 (docs/design.md). Session 45's general preset set False (with
     ``switch_restart`` refit-zero and ``cut_delay`` 3). Our extension."""
-    rearm_episodes: int = 0
-    """With ``optimism = until-reward``: after this many episodes in a row that paid no positive
-    reward since the switch, the targets' optimism again, until the next positive reward
-    switches once more. 0: never (the optimism ends at the first reward for good). Meant for a
-    reward found before the values know its way (MiniGrid DoorKey-5x5: one goal, then none in
-    95k steps under calibrated targets), to be looked for again with the optimism that found
-    it; measured there with n = 10, it did not find it again either (docs/design.md). Our
-    extension."""
-    cut_margin: float = 0.0
-    """With ``Config.k_target = cut`` (now or after the switch): how sure the posterior must be
-    that an action other than the mean's greedy one was worse before a window is cut there: its
-    mean Q below the greedy action's by more than this many predictive sds of the difference,
-    sqrt(var_taken + var_greedy). 0: wherever the two differ (Watkins). Where the actions'
-    values nearly tie (a MiniGrid room, where the draws choose among moves a hundredth apart)
-    every draw differs from the mean somewhere and the windows shrink to one step; a margin
-    keeps the k-step return there and cuts where a move is clearly wrong (the chain's). Our
-    extension."""
     cut_delay: float = 0.0
     """With ``Config.k_target = cut`` (now or after the switch): cut a window only where the action
     taken costs more than this many steps of delay, its mean Q below the greedy action's by
@@ -160,7 +143,7 @@ class BLRConfig:
     a wrong turn costs a step or two, which at gamma = 0.99 is a gap of about 0.01 V, below
     what the values resolve, and cutting there shrinks every window to a step; a move that
     ends the episode short of the reward (the chain's) costs all of V and is cut at once. 0:
-    wherever the draw and the mean differ (with ``cut_margin`` 0, Watkins). The general
+    wherever the draw and the mean differ (Watkins). The general
     preset's Farsighter: 3, with ``Config.k_target = cut`` (selection IQM 0.99 [0.97, 1.00]
     against 0.91 [0.87, 0.94] at 0; docs/results/suite/comparisons/cut-target). Our extension."""
     advantage_learning: float = 0.0
@@ -214,13 +197,6 @@ class BLRConfig:
     stop looking new to the posterior (docs/design.md, "Why a fixed random layer runs out at
     depth"); the cost is O(width^2) a row and O(width^3) a refresh. 0: ``random_features``
     whatever the observation. Our extension."""
-    random_features_kind: Literal["relu", "fourier"] = "relu"
-    """The random features' map: relu, psi(s) = relu(W s + b) / sqrt(width) with W, b standard
-    normal; fourier, psi(s) = sqrt(2 / width) cos(W s + b) with W ~ N(0, 1 / 0.25) and b uniform
-    on [0, 2 pi) (random Fourier features of a Gaussian kernel of lengthscale 0.5), whose
-    features of two distinct one-hot states share almost nothing, so a layer of a given width
-    keeps new states looking new for longer (docs/design.md, "Why a fixed random layer runs
-    out at depth")."""
     posterior_sampling: Literal["recent", "uniform"] = "recent"
     """Batch-mode refresh tuples: the latest D transitions (Table 1's 'most recent'), or D starts
     drawn uniformly from the whole buffer with replacement (the BDQN authors' code)."""
@@ -243,14 +219,6 @@ class BLRConfig:
             (self.cov_scale > 0, f"blr.cov_scale must be > 0 (got {self.cov_scale})"),
             (0 < self.forgetting <= 1, "blr.forgetting must be in (0, 1]"),
             (self.data_weight > 0, f"blr.data_weight must be > 0 (got {self.data_weight})"),
-            (
-                self.rearm_episodes >= 0,
-                f"blr.rearm_episodes must be >= 0 (got {self.rearm_episodes})",
-            ),
-            (
-                self.cut_margin >= 0 and math.isfinite(self.cut_margin),
-                f"blr.cut_margin must be a finite number >= 0 (got {self.cut_margin})",
-            ),
             (
                 self.cut_delay >= 0 and math.isfinite(self.cut_delay),
                 f"blr.cut_delay must be a finite number >= 0 (got {self.cut_delay})",

@@ -36,28 +36,19 @@ def exploratory_actions(
     head: BLRHead,
     phi_ED: torch.Tensor,
     actions_E: torch.Tensor,
-    margin: float,
     relative: float = 0.0,
 ) -> np.ndarray:
     """Which of the actions taken at features ``phi_ED`` were exploratory (``k_target = cut``):
-    not the posterior mean's greedy action, and (``margin`` > 0, ``blr.cut_margin``) with a mean
-    Q below the greedy action's by more than ``margin`` predictive sds of the difference, and
-    (``relative`` > 0: ``blr.cut_delay`` (1 - gamma)) by more than ``relative`` |Q_greedy|."""
+    not the posterior mean's greedy action, and (``relative`` > 0: ``blr.cut_delay``
+    (1 - gamma)) with a mean Q below the greedy action's by more than ``relative``
+    |Q_greedy|."""
     q_EA = phi_ED @ head.mean_AD.T
     greedy_E = q_EA.argmax(dim=1)
     differs_E = actions_E != greedy_E
-    if (margin > 0 or relative > 0) and bool(differs_E.any()):
+    if relative > 0 and bool(differs_E.any()):
         rows = differs_E.nonzero()[:, 0]
-        phi, taken, greedy = phi_ED[rows], actions_E[rows], greedy_E[rows]
-        best = q_EA[rows, greedy]
-        gap = best - q_EA[rows, taken]
-        sure = gap > relative * best.abs()
-        if margin > 0:
-            sd = (
-                head.predictive_var_action(phi, taken) + head.predictive_var_action(phi, greedy)
-            ).sqrt()
-            sure &= gap > margin * sd
-        differs_E[rows] = sure
+        best = q_EA[rows, greedy_E[rows]]
+        differs_E[rows] = best - q_EA[rows, actions_E[rows]] > relative * best.abs()
     return differs_E.cpu().numpy()
 
 
@@ -109,23 +100,12 @@ def restart_at_switch(
     target_mean_AD.copy_(head.mean_AD)
 
 
-def switch_at(
-    cfg: Config, calibrated: bool, unpaid: int, reward_E: np.ndarray, done_E: np.ndarray
-) -> tuple[bool | None, int]:
-    """``blr.optimism = until-reward``'s switch at a step that pays ``reward_E`` and ends the
-    episodes ``done_E``: True where the run (or seed) switches to calibrated targets (a
-    positive reward while optimistic), False where it takes up the optimism again
-    (``blr.rearm_episodes`` > 0 episodes in a row have paid nothing since), else None; and the
-    episodes ended in a row without a positive reward, after this step."""
-    if cfg.blr.optimism != "until-reward" or (calibrated and not cfg.blr.rearm_episodes):
-        return None, unpaid  # nothing to switch (the count matters only to a rearm)
-    paid = bool(np.any(np.asarray(reward_E) > 0))
-    unpaid = 0 if paid else unpaid + int(np.count_nonzero(done_E))
-    if paid and not calibrated:
-        return True, unpaid
-    if calibrated and 0 < cfg.blr.rearm_episodes <= unpaid:
-        return False, unpaid
-    return None, unpaid
+def switch_at(cfg: Config, calibrated: bool, reward_E: np.ndarray) -> bool:
+    """Whether ``blr.optimism = until-reward`` switches the run (or seed) to calibrated targets
+    at a step that pays ``reward_E``: its first positive reward while optimistic."""
+    if cfg.blr.optimism != "until-reward" or calibrated:
+        return False
+    return bool(np.any(np.asarray(reward_E) > 0))
 
 
 def records_exploratory(cfg: Config) -> bool:

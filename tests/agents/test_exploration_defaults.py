@@ -602,7 +602,7 @@ def test_auto_gives_discrete_tasks_the_general_preset_and_keeps_table_1_selectab
         "residual",
     )
     assert (cfg.blr.target, cfg.blr.redraw, cfg.k_target, cfg.k) == ("sample", "k", "cut", 10)
-    assert cfg.blr.cut_delay == 3.0 and cfg.blr.cut_margin == 0.0
+    assert cfg.blr.cut_delay == 3.0
     assert (cfg.blr.random_features, cfg.blr.data_weight) == (0, 100.0)
     assert cfg.blr.center_sample and cfg.blr.random_features_max == 0
     assert make_config("bdqn", "farsighter/Chain10-v0").blr.random_features_max == 0
@@ -826,75 +826,6 @@ def test_optimism_until_reward_switches_to_calibrated_targets_at_the_first_rewar
     assert not parts(plain).calibrated and parts(plain).k_target == "max"
 
 
-def test_rearm_takes_up_the_optimism_again_after_unpaid_episodes(tmp_path: Path) -> None:
-    """blr.rearm_episodes n: after the switch, n episodes in a row that pay no positive reward
-    (a reward anywhere in an episode, on any stream, starts the count again) bring back the
-    configured optimistic targets and uncut windows; the next positive reward switches again;
-    a checkpoint carries the count; n = 0 never rearms."""
-    from farsighter.exploration.optimism import switch_at
-
-    values = {**UNTIL_REWARD_CUT, "blr.rearm_episodes": 2}
-    agent = make_agent(tmp_path / "a", **values)
-    obs = np.zeros((1, 4), np.float32)
-
-    def step(a: Any, reward: float, done: bool) -> None:
-        _paid_step(a, obs, reward, done)
-
-    def optimistic(a: Any) -> bool:
-        p = parts(a)
-        targets = (p.blr.target, p.k_target, inner(a).replay.cut_exploratory)
-        if p.calibrated:
-            assert targets == ("mean", "cut", True)
-        else:
-            assert targets == ("sample", "max", False)
-            assert p.draws(4, True).keys() == {"eps_BA", "one_eps_BA"}
-        return not p.calibrated
-
-    step(agent, 0.0, True)
-    step(agent, 0.0, True)  # unpaid episodes before the switch change nothing
-    assert optimistic(agent)
-    step(agent, 1.0, False)
-    assert not optimistic(agent) and parts(agent).unpaid == 0
-    step(agent, 0.0, True)  # the paid episode ends: it counts as paid (the reward started it)
-    assert not optimistic(agent) and parts(agent).unpaid == 1
-    again = make_agent(tmp_path / "b", **values)
-    again.load_state_dict(agent.state_dict())
-    assert not optimistic(again) and parts(again).unpaid == 1
-    step(again, 0.0, False)
-    step(again, 0.5, False)  # a reward mid-episode: the count starts again
-    step(again, 0.0, True)
-    assert not optimistic(again) and parts(again).unpaid == 1
-    step(again, 0.0, True)
-    assert optimistic(again) and parts(again).unpaid == 2  # rearmed
-    step(again, 0.0, True)
-    assert optimistic(again)
-    step(again, 0.2, False)
-    assert not optimistic(again)  # switched once more
-    # the count over streams: a reward on any stream is pay; each stream's episode end counts
-    cfg = inner(again).cfg
-    assert switch_at(cfg, True, 0, np.array([0.0, 1.0]), np.array([True, True])) == (None, 0)
-    assert switch_at(cfg, True, 1, np.zeros(3), np.array([True, False, True])) == (False, 3)
-    assert switch_at(cfg, True, 0, np.zeros(3), np.zeros(3, bool)) == (None, 0)
-    # a seed of a batch carries its own count and state in its checkpoint
-    env = gym.make("CartPole-v1")
-    cfgs = [dataclasses.replace(cfg, seed=s) for s in (1, 2)]
-    batches = [
-        FarsighterAgent(cfgs, env.observation_space, env.action_space, device=torch.device("cpu"))
-        for _ in range(2)
-    ]
-    batches[0].calibrate(1)
-    batches[0].parts[1].unpaid = 1
-    batches[1].member(1).load_state_dict(batches[0].member(1).state_dict(include_replay=False))
-    assert (batches[1].parts[1].calibrated, batches[1].parts[1].unpaid) == (True, 1)
-    # n = 0 (the default) never rearms
-    never = make_agent(tmp_path / "c", **{**values, "blr.rearm_episodes": 0})
-    step(never, 1.0, True)
-    for _ in range(5):
-        step(never, 0.0, True)
-    assert not optimistic(never)
-    assert "unpaid" not in never.state_dict(include_replay=False)
-
-
 def test_stay_optimism_false_takes_no_draw_where_the_window_ends_where_it_began(
     tmp_path: Path,
 ) -> None:
@@ -1055,10 +986,12 @@ def test_until_reward_then_cut_is_the_default_run_until_the_first_reward(tmp_pat
     assert _files(tmp_path / "plain") == _files(tmp_path / "switch")
 
 
-def test_cut_margin_flags_only_actions_the_posterior_is_sure_are_worse(tmp_path: Path) -> None:
-    """blr.cut_margin m: an action other than the mean's greedy one is flagged only where its
-    mean Q is below the greedy's by more than m sds of the difference (the variances read from
-    every action's predictive variance, another code path); m = 0 flags every difference."""
+def test_cut_delay_flags_only_actions_the_mean_holds_to_cost_more_than_the_delay(
+    tmp_path: Path,
+) -> None:
+    """blr.cut_delay d: an action other than the mean's greedy one is flagged only where its
+    mean Q is below the greedy's by more than d (1 - gamma) |Q_greedy|; d = 0 flags every
+    difference (Watkins)."""
     from farsighter.exploration.optimism import cut_relative, exploratory_actions
 
     agent = inner(make_agent(tmp_path / "a", **{"k_target": "cut", "k": 3}))
@@ -1069,29 +1002,16 @@ def test_cut_margin_flags_only_actions_the_posterior_is_sure_are_worse(tmp_path:
     actions = torch.randint(0, agent.num_actions, (400,), generator=g)
     q = phi @ head.mean_AD.T
     greedy = q.argmax(dim=1)
-    var = head.predictive_var(phi)
     rows = torch.arange(400)
-    gap = q[rows, greedy] - q[rows, actions]
-    sd = (var[rows, greedy] + var[rows, actions]).sqrt()
-    for margin in (0.0, 0.5, 1.0, 3.0):
-        expected = ((actions != greedy) & (gap > margin * sd)).numpy()
-        if margin == 0:
-            expected = (actions != greedy).numpy()
-        got = exploratory_actions(head, phi, actions, margin)
-        assert np.array_equal(got, expected), margin
-    counts = [exploratory_actions(head, phi, actions, m).sum() for m in (0.0, 1.0, 3.0)]
-    assert counts[0] > counts[1] > counts[2] > 0, counts  # the margin bites at each step
-    # blr.cut_delay: the gap against d (1 - gamma) |Q_greedy|, alone and with a margin
     best = q[rows, greedy]
-    for delay, margin in ((2.0, 0.0), (20.0, 0.0), (20.0, 1.0)):
+    gap = best - q[rows, actions]
+    assert np.array_equal(exploratory_actions(head, phi, actions), (actions != greedy).numpy())
+    for delay in (2.0, 20.0):
         rel = delay * (1 - agent.cfg.gamma)
         expected = (actions != greedy) & (gap > rel * best.abs())
-        if margin:
-            expected &= gap > margin * sd
-        got = exploratory_actions(head, phi, actions, margin, rel)
-        assert np.array_equal(got, expected.numpy()), (delay, margin)
+        assert np.array_equal(exploratory_actions(head, phi, actions, rel), expected.numpy())
     by_delay = [
-        exploratory_actions(head, phi, actions, 0.0, d * (1 - agent.cfg.gamma)).sum()
+        exploratory_actions(head, phi, actions, d * (1 - agent.cfg.gamma)).sum()
         for d in (0.0, 20.0, 100.0)
     ]
     assert by_delay[0] > by_delay[1] > by_delay[2] > 0, by_delay  # the delay bites at each step

@@ -42,29 +42,6 @@ def test_the_torso_appends_fixed_random_relu_features() -> None:
     assert norms.mean().item() == pytest.approx(1.0, abs=0.05)
 
 
-def test_fourier_features_are_cosines_whose_one_hot_states_share_almost_nothing() -> None:
-    from farsighter.networks import FOURIER_LENGTHSCALE
-
-    torch.manual_seed(0)
-    torso = RandomFeatureTorso(MLPTorso(6, (8, 5)), 6, 16, "fourier")
-    x = torch.randn(3, 6)
-    psi = math.sqrt(2 / 16) * torch.cos(x @ torso.rf_weight.T + torso.rf_bias)
-    torch.testing.assert_close(torso(x)[:, 5:], psi)
-    assert 0 <= torso.rf_bias.min() and torso.rf_bias.max() < 2 * math.pi
-    # deep sea N = 20's cells: each cell's features have a squared norm of about 1 (as the
-    # ReLU features' do), and two distinct cells' features are nearly orthogonal (their
-    # kernel exp(-1 / l^2) = 0.018), where the ReLU features share about half of theirs
-    torch.manual_seed(0)
-    eye = torch.eye(400)
-    cos = RandomFeatureTorso(MLPTorso(400, (8,)), 400, 4096, "fourier").random_features(eye)
-    relu = RandomFeatureTorso(MLPTorso(400, (8,)), 400, 4096).random_features(eye)
-    assert cos.square().sum(1).mean().item() == pytest.approx(1.0, abs=0.05)
-    off = ~torch.eye(400, dtype=torch.bool)
-    kernel = math.exp(-1 / FOURIER_LENGTHSCALE**2)
-    assert (cos @ cos.T)[off].mean().item() == pytest.approx(kernel, abs=0.01)
-    assert (relu @ relu.T)[off].mean().item() > 0.4
-
-
 def test_an_online_torso_and_its_target_share_their_random_features(tmp_path: Path) -> None:
     """online_and_target computes psi(s') once for both torsos: the same numbers as two
     forwards, after training moved the online torso away from its target, and the random

@@ -56,17 +56,17 @@ def _files(run: Path) -> dict[str, list[str]]:
             {"k": 3, "loss": "mse", "max_grad_norm": 0.5, "optimizer": "rmsprop", "num_envs": 2},
         ),
         ("ddqn", "farsighter/DeepSea6-v0", {"batch_size": 24}),
-        # the defaults: k = 10 with k_target max, the targets' posterior noise, a draw held for
-        # k, each seed's own fixed random features beside its learned ones
+        # the defaults: k = 10 with the cut target, the targets' posterior noise, centred, a
+        # draw held for k
         ("farsighter", "CartPole-v1", {"preset": "general"}),
-        # random Fourier features in place of the ReLU ones (each seed's cos layer, stacked),
+        # fixed random features beside the learned ones (each seed's random layer, stacked),
         # the targets' draw at half the posterior's width
         (
             "farsighter",
             "farsighter/DeepSea6-v0",
             {
                 "preset": "general",
-                "blr__random_features_kind": "fourier",
+                "blr__random_features": 48,
                 "blr__target_noise_scale": 0.5,
                 "batch_size": 24,
             },
@@ -101,8 +101,7 @@ def _files(run: Path) -> dict[str, list[str]]:
             {"blr__posterior_sampling": "uniform", "target_update_every": 400},
         ),
         # the default's targets until each seed's own first reward, then the mean's target cut
-        # before exploratory actions (each seed's streams switch on their own), and the optimism
-        # again after each unpaid episode since (blr.rearm_episodes)
+        # before exploratory actions (each seed's streams switch on their own)
         (
             "farsighter",
             "farsighter/Chain8-v0",
@@ -111,7 +110,6 @@ def _files(run: Path) -> dict[str, list[str]]:
                 "preset": "general",
                 "blr__optimism": "until-reward",
                 "blr__calibrated_k_target": "cut",
-                "blr__rearm_episodes": 1,
                 "blr__switch_restart": "none",  # the targets kept (the next case restarts)
                 "k": 3,
                 "learning_starts": 100,
