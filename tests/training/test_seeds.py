@@ -200,7 +200,8 @@ def test_a_seed_in_a_batch_trains_as_it_does_alone(
             for seed in SEEDS
         ]
         assert any(steps), steps
-    if "blr__act_width" in values:  # each seed's own factor, widening its draws
+    if values.get("blr__act_width") and "blr__optimism" not in values:  # (the act-width case)
+        # each seed's own factor, widening its draws
         scales = [
             _agent_state(tmp_path / "batch" / f"s{seed}" / "checkpoint.pt")["head"]["act_scale"]
             for seed in SEEDS
