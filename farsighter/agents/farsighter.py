@@ -142,16 +142,16 @@ class FarsighterAgent:
             done = np.logical_or(st.terminated_E, st.truncated_E)
             p.exploration.observe(done, st.reward_E, st.truncated_E)
 
-    def calibrate(self, s: int = 0, restart: bool = True, on: bool = True) -> None:
+    def calibrate(self, s: int = 0, restart: bool = True) -> None:
         """Seed ``s``'s ``blr.optimism = until-reward`` switch (:meth:`SeedParts.calibrate`):
         its streams cut their windows from now on where its calibrated target is cut, and its
         posterior restarts (``blr.switch_restart``; ``restart = False``: a checkpoint's
-        statistics, loaded, are kept). ``on = False``: back to the optimism."""
+        statistics, loaded, are kept)."""
         p, streams = self.parts[s], self.replay.seed_streams(s)
-        p.calibrate(on)
+        p.calibrate()
         self.learner.forget_graphs()  # the calibrated loss branches (blr.advantage_learning)
         self.replay.cut_E[streams] = p.k_target == "cut"
-        if restart and on:  # a refit reads features trained on the replay, else the prior
+        if restart:  # a refit reads features trained on the replay, else the prior
             own = partial(self.torso.member_forward, s=s)
             args = (self.replay, self.cfg, p.counters.k, self.device, own, streams)
             rows = partial(replay_rows, *args) if p.counters.updates else None

@@ -57,12 +57,12 @@ class SeedParts:
         # phi_target(s') of replay rows (keyed by this seed's streams) until the next copy
         self.cache = make_target_cache(cfg, device, dim)
 
-    def calibrate(self, on: bool = True) -> None:
+    def calibrate(self) -> None:
         """``blr.optimism = until-reward``'s switch: from now on the posterior mean and the
         k-step target alone (no draw, no max with the one-step target; cut at exploratory
-        actions where ``k_target = cut``); ``on = False``: the optimism again."""
-        self.calibrated = on
-        self.blr, self.k_target = calibrated(self.cfg.blr, self.cfg.k_target, on)
+        actions where ``k_target = cut``)."""
+        self.calibrated = True
+        self.blr, self.k_target = calibrated(self.cfg.blr, self.cfg.k_target)
 
     def draws(self, rows: int, one_step: bool = False) -> Tensors:
         """What the targets of ``rows`` rows draw (:func:`target_draws`), from this seed's

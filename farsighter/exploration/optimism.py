@@ -21,12 +21,10 @@ from farsighter.ops.blr import BLRHead
 from farsighter.ops.refit import ReplayRows, refit
 
 
-def calibrated(blr: BLRConfig, k_target: KTarget, on: bool = True) -> tuple[BLRConfig, KTarget]:
-    """``blr.optimism = until-reward``'s targets after its switch (the configured ``blr`` and
-    ``k_target`` where ``on`` is False): the posterior mean's, and the k-step target alone (cut
-    at exploratory actions where ``k_target`` or ``blr.calibrated_k_target`` is cut)."""
-    if not on:
-        return blr, k_target
+def calibrated(blr: BLRConfig, k_target: KTarget) -> tuple[BLRConfig, KTarget]:
+    """``blr.optimism = until-reward``'s targets after its switch: the posterior mean's, and the
+    k-step target alone (cut at exploratory actions where ``k_target`` or
+    ``blr.calibrated_k_target`` is cut)."""
     cut = k_target == "cut" or blr.calibrated_k_target == "cut"
     return dataclasses.replace(blr, target="mean"), "cut" if cut else "k"
 

@@ -111,12 +111,13 @@ def test_a_compiled_farsighter_follows_its_switch(tmp_path: Path) -> None:
             blr__target="sample",
             k_target="max",
         )
-        _feed(agent, 300)  # its rewards are positive: the switch happens here
-        assert parts(agent).calibrated
+        _feed(agent, 300, positive=False)  # no positive reward yet: the optimistic branch
+        assert not parts(agent).calibrated
         losses = []
         for step in range(1, 121):
             if step == 61:
-                inner(agent).calibrate(on=False)  # the optimism again: the other branch
+                _feed(agent, 1, seed=1, positive=True)  # the first reward: the switch
+                assert parts(agent).calibrated
             m = agent.learn(step)
             if "td_loss" in m:
                 losses.append(float(m["td_loss"]))
@@ -126,7 +127,7 @@ def test_a_compiled_farsighter_follows_its_switch(tmp_path: Path) -> None:
     comp, comp_losses = run("compiled", True)
     learner = inner(comp).learner
     assert hasattr(learner.step, "_torchdynamo_orig_callable") and not learner.graphs
-    assert not parts(comp).calibrated and len(comp_losses) == len(eager_losses) > 40
+    assert parts(comp).calibrated and len(comp_losses) == len(eager_losses) > 40
     np.testing.assert_allclose(comp_losses, eager_losses, rtol=1e-4, atol=1e-6)
     for a, b in zip(_params(comp), _params(eager), strict=True):
         torch.testing.assert_close(a, b, rtol=1e-4, atol=1e-5)

@@ -28,15 +28,19 @@ def make_agent(tmp_path: Path, algo: str = "farsighter", **kw: object) -> Sole:
     return agent
 
 
-def feed(agent: Sole, n: int, seed: int = 0) -> None:
+def feed(agent: Sole, n: int, seed: int = 0, positive: bool | None = None) -> None:
+    """``n`` random transitions (an episode ends every 40); rewards standard normal, or their
+    magnitudes (``positive`` True) or negated magnitudes (False)."""
     rng = np.random.default_rng(seed)
+    sign = {None: None, True: 1.0, False: -1.0}[positive]
     for t in range(n):
         end = t % 40 == 39
+        reward = rng.normal()
         agent.observe(
             VectorStep(
                 rng.normal(size=(1, 4)).astype(np.float32),
                 rng.integers(0, 2, size=1),
-                np.array([rng.normal()]),
+                np.array([reward if sign is None else sign * abs(reward)]),
                 np.array([end]),
                 np.array([False]),
                 [rng.normal(size=4).astype(np.float32)] if end else None,
