@@ -665,6 +665,24 @@ def test_auto_gives_discrete_tasks_the_general_preset_and_keeps_table_1_selectab
     assert make_config("farsighter", "CartPole-v1", blr__redraw="step").blr.redraw == "step"
 
 
+def test_the_locks_preset_is_the_suites_session_45_agent() -> None:
+    """--preset locks gives Farsighter the config the suite ran as 'Farsighter (session 45)'
+    (comparisons/session-45: the general preset under session 45's overrides), the preset's
+    name aside; other algorithms are refused it; a flag still wins over it."""
+    from farsighter.studies.suite_file import BASES
+
+    for env in ("farsighter/Chain10-v0", "MiniGrid-DoorKey-5x5-v0", "CartPole-v1"):
+        locks = make_config("farsighter", env, preset="locks")
+        suite_agent = make_config("farsighter", env, **BASES["session-45"])
+        assert locks.preset == "locks"
+        assert dataclasses.replace(locks, preset=suite_agent.preset) == suite_agent
+    assert locks.blr.optimism == "until-reward" and locks.blr.random_features == 512
+    with pytest.raises(ConfigError, match="preset 'locks' is made for --algo farsighter"):
+        make_config("bdqn", "CartPole-v1", preset="locks")
+    flagged = make_config("farsighter", "CartPole-v1", preset="locks", blr__optimism="always")
+    assert flagged.blr.optimism == "always"
+
+
 def test_k_target_max_is_refused_where_it_does_nothing() -> None:
     with pytest.raises(
         ConfigError, match="k_target max, max-mean and cut are only supported by --algo bdqn"
