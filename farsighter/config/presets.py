@@ -92,6 +92,8 @@ _FRESH_PER_ALGO: dict[str, dict[str, Any]] = {
     "bdqn": {"blr.redraw": "episode"},
     "farsighter": {"k_target": "max"},
 }
+# The general preset's values for every agent (the locks preset starts from them too).
+_GENERAL: dict[str, Any] = {**_CONTROL, **_SMALL_TASK_LEARNER, **_FRESH_POSTERIOR}
 # The general preset's, for Farsighter: the paper's algorithm (BLR head, Thompson draws, k-step
 # targets) on the small-task learner, with five settings of ours, chosen on the exploration
 # suite's selection set and checked on its validation set (SPEC section 6;
@@ -182,11 +184,7 @@ PRESETS: dict[str, Preset] = {
             "Farsighter paper Table 1 (control column) for gamma and the BLR values; the "
             "learner and the posterior settings are ours, chosen on the exploration suite "
             "(benchmarks/small_task_learner.py, deleted after c5d8fda; farsighter suite; docs/results/suite)",
-            {
-                **_CONTROL,
-                **_SMALL_TASK_LEARNER,
-                **_FRESH_POSTERIOR,
-            },
+            dict(_GENERAL),
             per_algo=_GENERAL_PER_ALGO,
         ),
         Preset(
@@ -200,13 +198,7 @@ PRESETS: dict[str, Preset] = {
             "chain, and loses RiverSwim, SixArms, CartPole and FrozenLake.",
             "ours: docs/results/suite/comparisons/session-45 (5 seeds against the general "
             "preset's default: IQM 0.85 [0.79, 0.89] against 0.87 [0.82, 0.91] over 18 tasks)",
-            {
-                **_CONTROL,
-                **_SMALL_TASK_LEARNER,
-                **_FRESH_POSTERIOR,
-                **_GENERAL_PER_ALGO["farsighter"],
-                **PREVIOUS_GENERAL_FARSIGHTER,
-            },
+            {**_GENERAL, **_GENERAL_PER_ALGO["farsighter"], **PREVIOUS_GENERAL_FARSIGHTER},
             algo="farsighter",
         ),
         Preset(
