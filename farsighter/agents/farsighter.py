@@ -52,6 +52,7 @@ from farsighter.agents.farsighter_loss import FarsighterLoss, seed_key
 from farsighter.agents.farsighter_parts import FarsighterMember, SeedParts
 from farsighter.agents.farsighter_posterior import (
     accumulate,
+    fitted_dim,
     refresh_posterior,
     replay_rows,
     seeded_torso,
@@ -90,11 +91,11 @@ class FarsighterAgent:
         self.cfgs, self.device, self.num_actions = list(cfgs), device, int(act_space.n)
         built = [seeded_torso(c, obs_space, self.num_actions) for c in cfgs]  # each seed's own
         torsos = [torso for torso, _ in built]
-        dim = int(torsos[0].out_dim)
+        dim, fit_dim = int(torsos[0].out_dim), fitted_dim(cfg, torsos[0])
         self.torso = seed_network(torsos).to(device)
         torso_target = seed_network([copy.deepcopy(torso) for torso in torsos]).to(device)
         self.parts = [
-            SeedParts(c, self.num_actions, dim, init_AD, device)
+            SeedParts(c, self.num_actions, dim, init_AD, device, fit_dim)
             for c, (_, init_AD) in zip(cfgs, built, strict=True)
         ]
         # Eq. 8, with the target features of sampled next states kept until the next copy

@@ -38,13 +38,19 @@ class SeedParts:
     generator seed + 3), and its Eq. 8 on given features."""
 
     def __init__(
-        self, cfg: Config, num_actions: int, dim: int, init_AD: torch.Tensor, device: torch.device
+        self,
+        cfg: Config,
+        num_actions: int,
+        dim: int,
+        init_AD: torch.Tensor,
+        device: torch.device,
+        fit_dim: int | None = None,
     ) -> None:
         self.cfg = cfg
         # the targets (blr.target, k_target), which blr.optimism until-reward switches
         self.blr, self.k_target = cfg.blr, cfg.k_target
         self.calibrated = False  # blr.optimism's switch
-        self.head = make_head(cfg, num_actions, dim, init_AD, device)
+        self.head = make_head(cfg, num_actions, dim, init_AD, device, fit_dim)
         self.target_mean_AD = self.head.mean_AD.clone()  # moved by the target copy alone
         self.counters = FarsighterCounters(k=cfg.k)
         # Eq. 7: each environment's weight draw and when it is replaced (blr.redraw)

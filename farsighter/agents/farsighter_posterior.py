@@ -83,10 +83,16 @@ def seeded_torso(
 
 
 def make_head(
-    cfg: Config, num_actions: int, dim: int, init_AD: torch.Tensor, device: torch.device
+    cfg: Config,
+    num_actions: int,
+    dim: int,
+    init_AD: torch.Tensor,
+    device: torch.device,
+    fit_dim: int | None = None,
 ) -> BLRHead:
     """The BLR posterior of ``cfg.blr`` over ``num_actions`` weight vectors of width ``dim``,
-    its mean starting at ``init_AD`` (where a linear Q head would start)."""
+    its mean starting at ``init_AD`` (where a linear Q head would start) over the ``fit_dim``
+    features it regresses on (:func:`fitted_dim`) and at 0 past them."""
     b = cfg.blr
     head = BLRHead(
         num_actions=num_actions,
@@ -97,9 +103,21 @@ def make_head(
         forgetting=b.forgetting,
         scale=b.scale,
         device=device,
+        fit_dim=fit_dim,
     )
+    init_AD = init_AD.clone()
+    init_AD[:, head.fit_dim :] = 0.0
     head.set_mean(init_AD.to(device))
     return head
+
+
+def fitted_dim(cfg: Config, torso: Torso) -> int | None:
+    """The features the posterior mean regresses on (``BLRHead``'s ``fit_dim``): the learned
+    ones alone where the random features fit no target (``blr.random_features_fit`` False),
+    else all of them (None)."""
+    if isinstance(torso, RandomFeatureTorso) and not cfg.blr.random_features_fit:
+        return int(torso.torso.out_dim)
+    return None
 
 
 def accumulate(

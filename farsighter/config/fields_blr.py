@@ -197,6 +197,15 @@ class BLRConfig:
     stop looking new to the posterior (docs/design.md, "Why a fixed random layer runs out at
     depth"); the cost is O(width^2) a row and O(width^3) a refresh. 0: ``random_features``
     whatever the observation. Our extension."""
+    random_features_fit: bool = True
+    """Whether the posterior mean fits the random features too. True: one regression over the
+    learned and the random features, so the random ones also fit values, state by state (a
+    goal's value then reaches no state the run has not taken it from). False: their block of
+    the posterior fits no target and shares no covariance with the learned features
+    (``BLRHead``'s ``fit_dim``): the values are the learned features' alone, and the random
+    block only widens the draws, by up to the prior's width where an observation is new and
+    narrowing where the run has been: uncertainty about states, which the learned features,
+    shared across states, do not hold. Our extension."""
     posterior_sampling: Literal["recent", "uniform"] = "recent"
     """Batch-mode refresh tuples: the latest D transitions (Table 1's 'most recent'), or D starts
     drawn uniformly from the whole buffer with replacement (the BDQN authors' code)."""

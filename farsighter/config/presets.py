@@ -134,6 +134,10 @@ _GENERAL_PER_ALGO: dict[str, dict[str, Any]] = {
         "blr.center_sample": True,
         "k_target": "cut",
         "blr.cut_delay": 3.0,
+        "blr.random_features": 32,
+        "blr.random_features_max": 1024,
+        "blr.random_features_fit": False,
+        "blr.target_noise_scale": 0.5,
     },
 }
 # The general preset's Farsighter before the defaults were chosen on the suite (session 45,
@@ -152,6 +156,17 @@ PREVIOUS_GENERAL_FARSIGHTER: dict[str, Any] = {
     "blr.advantage_learning": 0.9,
     "blr.revisit_action": "uniform-timeout",
     "blr.center_sample": False,
+    "blr.random_features_fit": True,
+    "blr.target_noise_scale": 1.0,
+}
+# The general preset's Farsighter before its random features (session 52, 28d816b): the posterior
+# over the learned features alone, the targets' draws at full width; for the comparisons made
+# against it (`farsighter suite` agents with `base: session-52`).
+PREVIOUS_GENERAL_FARSIGHTER_52: dict[str, Any] = {
+    "blr.random_features": 0,
+    "blr.random_features_max": 0,
+    "blr.random_features_fit": True,
+    "blr.target_noise_scale": 1.0,
 }
 # The cartpole preset's learning checks (tests/learning/test_learning_slow.py) were measured with a draw
 # held per episode; kept so that they stay what was measured.

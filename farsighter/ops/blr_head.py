@@ -47,6 +47,9 @@ class BLRHead:
             sigma_eps * prior_std / noise_std (see the :mod:`farsighter.ops.blr` docstring).
         device: where statistics and caches live.
         stats_dtype: dtype of the sufficient statistics and of the exact posterior.
+        fit_dim: the features regressed on the targets, the first ``fit_dim`` (None: all). The
+            rest form a block of their own, fitted to 0 and with no cross terms: its mean stays
+            0 (after the first refresh) and its covariance narrows only where rows were added.
     """
 
     def __init__(
@@ -61,11 +64,14 @@ class BLRHead:
         scale: str = "fixed",
         device: str | torch.device = "cpu",
         stats_dtype: torch.dtype = torch.float64,
+        fit_dim: int | None = None,
     ) -> None:
         if num_actions < 1:
             raise ValueError(f"num_actions must be >= 1, got {num_actions}")
         if dim < 1:
             raise ValueError(f"dim must be >= 1, got {dim}")
+        if fit_dim is not None and not 1 <= fit_dim <= dim:
+            raise ValueError(f"fit_dim must be in [1, {dim}], got {fit_dim}")
         _check_stds(prior_std, noise_std)
         if not (cov_scale >= 0 and math.isfinite(cov_scale)):
             raise ValueError(f"cov_scale must be a finite number >= 0, got {cov_scale}")
@@ -81,6 +87,10 @@ class BLRHead:
         self.prior_ratio = float(prior_std) / float(noise_std)
         self.num_actions = int(num_actions)
         self.dim = int(dim)
+        # The features past fit_dim fit no target: their block of the statistics gets no
+        # y and no cross terms with the first fit_dim, so their mean stays 0 and their
+        # covariance is their own (uncertainty about where the run has been, not values).
+        self.fit_dim = self.dim if fit_dim is None else int(fit_dim)
         self.prior_std = float(prior_std)
         self.noise_std = float(noise_std)
         self.cov_scale = float(cov_scale)
@@ -149,7 +159,8 @@ class BLRHead:
 
         Existing statistics are first multiplied by ``forgetting``. Each action's rows, in their
         order in the minibatch, are added with one GEMM per chunk of ``chunk_size`` rows
-        (chunking bounds the float64 copy of phi: 8192 x 512 x 8 B = 32 MiB).
+        (chunking bounds the float64 copy of phi: 8192 x 512 x 8 B = 32 MiB). Features past
+        ``fit_dim`` go into their own block, with targets 0.
         """
         if phi_ND.dim() != 2 or phi_ND.shape[1] != self.dim:
             raise ValueError(f"phi_ND must have shape (N, {self.dim}), got {tuple(phi_ND.shape)}")
@@ -183,9 +194,16 @@ class BLRHead:
             for lo in range(0, count, chunk_size):
                 idx_C = rows_M[lo : lo + chunk_size]
                 x_CD = phi_ND.index_select(0, idx_C).to(self.stats_dtype)
-                self.phiphiT_ADD[a].addmm_(x_CD.T, x_CD)
                 y_C = y_N.index_select(0, idx_C)
-                self.phiy_AD[a].addmv_(x_CD.T, y_C)
+                f = self.fit_dim
+                if f == self.dim:
+                    self.phiphiT_ADD[a].addmm_(x_CD.T, x_CD)
+                    self.phiy_AD[a].addmv_(x_CD.T, y_C)
+                else:  # two blocks; the second's targets are 0
+                    fit_CF, rest_CR = x_CD[:, :f], x_CD[:, f:]
+                    self.phiphiT_ADD[a, :f, :f].addmm_(fit_CF.T, fit_CF)
+                    self.phiphiT_ADD[a, f:, f:].addmm_(rest_CR.T, rest_CR)
+                    self.phiy_AD[a, :f].addmv_(fit_CF.T, y_C)
                 self.yy_A[a] += y_C.square().sum()
 
     @torch.no_grad()

@@ -16,7 +16,7 @@ from typing import Any
 
 import yaml
 
-from farsighter.config.presets import PREVIOUS_GENERAL_FARSIGHTER
+from farsighter.config.presets import PREVIOUS_GENERAL_FARSIGHTER, PREVIOUS_GENERAL_FARSIGHTER_52
 from farsighter.studies.runner import Agent
 
 SUITE_FILE = Path(__file__).with_name("suite.yaml")
@@ -94,7 +94,11 @@ def _reference(task: dict[str, Any], key: str, where: str) -> Reference:
     return Reference(float(task[key]), source)
 
 
-BASES: dict[str, dict[str, Any]] = {"": {}, "session-45": PREVIOUS_GENERAL_FARSIGHTER}
+BASES: dict[str, dict[str, Any]] = {
+    "": {},
+    "session-45": PREVIOUS_GENERAL_FARSIGHTER,
+    "session-52": PREVIOUS_GENERAL_FARSIGHTER_52,
+}
 """An agent's ``base`` in a study's file: overrides kept in the library, under its own."""
 AGENT_KEYS = ("algo", "base", "overrides")
 """What an agent of a study's file may give: its algorithm (required), a :data:`BASES` name and

@@ -603,8 +603,10 @@ def test_auto_gives_discrete_tasks_the_general_preset_and_keeps_table_1_selectab
     )
     assert (cfg.blr.target, cfg.blr.redraw, cfg.k_target, cfg.k) == ("sample", "k", "cut", 10)
     assert cfg.blr.cut_delay == 3.0
-    assert (cfg.blr.random_features, cfg.blr.data_weight) == (0, 100.0)
-    assert cfg.blr.center_sample and cfg.blr.random_features_max == 0
+    assert (cfg.blr.random_features, cfg.blr.data_weight) == (32, 100.0)
+    assert cfg.blr.center_sample and cfg.blr.random_features_max == 1024
+    # the random features widen the draws and fit no value; the targets' draws at half width
+    assert not cfg.blr.random_features_fit and cfg.blr.target_noise_scale == 0.5
     assert make_config("bdqn", "farsighter/Chain10-v0").blr.random_features_max == 0
     assert make_config("bdqn", "farsighter/Chain10-v0").blr.data_weight == 1.0  # Farsighter's
     # RND's bonus weight chosen on the suite (comparisons/rnd-weight); the paper's elsewhere
@@ -677,6 +679,8 @@ def test_the_locks_preset_is_the_suites_session_45_agent() -> None:
         assert locks.preset == "locks"
         assert dataclasses.replace(locks, preset=suite_agent.preset) == suite_agent
     assert locks.blr.optimism == "until-reward" and locks.blr.random_features == 512
+    # session 45's random features fitted values, its targets' draws at full width
+    assert locks.blr.random_features_fit and locks.blr.target_noise_scale == 1.0
     with pytest.raises(ConfigError, match="preset 'locks' is made for --algo farsighter"):
         make_config("bdqn", "CartPole-v1", preset="locks")
     flagged = make_config("farsighter", "CartPole-v1", preset="locks", blr__optimism="always")

@@ -82,11 +82,14 @@ def test_an_online_torso_and_its_target_share_their_random_features(tmp_path: Pa
         assert torch.equal(shared_target, target(obs))
 
 
-def _sd_by_visits(random_features: int, tmp: Path) -> tuple[float, float]:
+LAST: dict[str, Any] = {}
+
+
+def _sd_by_visits(random_features: int, tmp: Path, **overrides: Any) -> tuple[float, float]:
     """Farsighter on deep sea N = 6 for 600 episodes (learning from step 1,000): the median
     predictive sd of the cells the run never can reach (above the diagonal) and of the six cells
     it visited most."""
-    n, seen = 6, {}
+    n, seen = 6, LAST
 
     class Keep:
         def on_step(self, global_step: int, info: dict[str, Any], agent: Any) -> None:
@@ -102,9 +105,9 @@ def _sd_by_visits(random_features: int, tmp: Path) -> tuple[float, float]:
         eval_every=0,
         eval_episodes=1,
         progress=False,
-        run_dir=str(tmp / f"rf{random_features}"),
+        run_dir=str(tmp / f"rf{random_features}{len(overrides)}"),
         torch_threads=1,
-        **{"blr.random_features": random_features},
+        **{"blr.random_features": random_features, **overrides},
     )
     train(cfg, [Keep()])
     agent = seen["agent"]
@@ -114,6 +117,7 @@ def _sd_by_visits(random_features: int, tmp: Path) -> tuple[float, float]:
     visits = np.bincount(frames[frames.max(1) > 0].argmax(1), minlength=n * n).reshape(n, n)
     _, var = agent.q_estimate(np.eye(n * n, dtype=np.float32))
     sd = np.sqrt(var).max(1).reshape(n, n)
+    seen["head"] = inner(agent).parts[0].head
     row, col = np.indices((n, n))
     often = visits >= np.sort(visits[col <= row])[-6]  # the six most visited cells
     return float(np.median(sd[col > row])), float(np.median(sd[often]))
@@ -128,6 +132,22 @@ def test_with_random_features_the_posterior_is_wide_where_the_run_has_not_been(
     # over the learned features alone the sd barely follows the visits (measured: 1.2)
     unreachable, visited = _sd_by_visits(0, tmp_path)
     assert with_random > 2 * unreachable / visited
+
+
+def test_random_features_that_fit_no_target_widen_the_draws_where_the_run_has_not_been(
+    tmp_path: Path,
+) -> None:
+    """blr.random_features_fit False: the values are the learned features' alone (the random
+    block's mean stays exactly 0), and the random block still widens the draws where the run
+    has not been."""
+    unreachable, visited = _sd_by_visits(128, tmp_path, **{"blr.random_features_fit": False})
+    head = LAST["head"]
+    assert head.fit_dim == head.dim - 128
+    assert torch.count_nonzero(head.mean_AD[:, head.fit_dim :]) == 0
+    assert torch.count_nonzero(head.mean_AD[:, : head.fit_dim]) > 0
+    cov_ADD = head.cov_ADD
+    assert torch.count_nonzero(cov_ADD[:, : head.fit_dim, head.fit_dim :]) == 0
+    assert unreachable / visited > 5  # measured: 20 (0.58 against 0.028)
 
 
 def test_random_features_are_checked_and_their_seeds_batch(

@@ -99,6 +99,34 @@ def test_batch_posterior_matches_numpy_closed_form() -> None:
     np.testing.assert_array_equal(head.count_A.numpy(), counts)
 
 
+def test_features_past_fit_dim_fit_no_target_and_share_no_covariance() -> None:
+    """fit_dim f: the posterior is two independent ones in closed form, the first f features
+    regressed on the targets, the rest on targets 0 (mean 0, own covariance)."""
+    counts, dim, f = [60, 9, 0], 7, 4
+    phi, act, y = _make_data(counts, dim, seed=5)
+    head = _head(len(counts), dim, fit_dim=f)
+    for lo in range(0, len(y), 25):
+        head.accumulate(phi[lo : lo + 25], act[lo : lo + 25], y[lo : lo + 25], chunk_size=8)
+    head.refresh()
+    x, a_np, y_np = phi.numpy(), act.numpy(), y.numpy()
+    mean_fit, cov_fit = _numpy_posterior(x[:, :f], a_np, y_np, 3, PRIOR_STD, NOISE_STD)
+    zeros = np.zeros_like(y_np)
+    mean_rest, cov_rest = _numpy_posterior(x[:, f:], a_np, zeros, 3, PRIOR_STD, NOISE_STD)
+    mean_t, cov_t = (t.numpy() for t in head.posterior())
+    np.testing.assert_allclose(mean_t[:, :f], mean_fit, rtol=1e-8, atol=1e-10)
+    np.testing.assert_array_equal(mean_t[:, f:], 0.0)
+    np.testing.assert_allclose(cov_t[:, :f, :f], cov_fit, rtol=1e-8, atol=1e-12)
+    np.testing.assert_allclose(cov_t[:, f:, f:], cov_rest, rtol=1e-8, atol=1e-12)
+    np.testing.assert_array_equal(cov_t[:, :f, f:], 0.0)
+    np.testing.assert_array_equal(head.count_A.numpy(), counts)
+    # the whole width fitted differs (the check above can fail)
+    whole = _head(len(counts), dim)
+    whole.fit(phi, act, y)
+    assert np.abs(whole.posterior()[0].numpy()[:2, f:]).min() > 0
+    with pytest.raises(ValueError, match="fit_dim"):
+        _head(2, 3, fit_dim=4)
+
+
 def test_default_hyperparameters_are_spec_values() -> None:
     head = BLRHead(num_actions=2, dim=3)
     assert head.prior_std == 0.1 and head.noise_std == 1.0
