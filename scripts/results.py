@@ -106,8 +106,10 @@ def publish(build: Path, dest: Path) -> None:
             continue
         (dest / rel).parent.mkdir(parents=True, exist_ok=True)
         if file.suffix in (".md", ".json", ".csv"):  # paths as where the files now live
-            text = file.read_text().replace(str(build), dest.relative_to(ROOT).as_posix())
-            (dest / rel).write_text(text)
+            with open(file, newline="") as f:  # line endings as written (csv's are CRLF)
+                text = f.read().replace(str(build), dest.relative_to(ROOT).as_posix())
+            with open(dest / rel, "w", newline="") as f:
+                f.write(text)
         else:
             shutil.copy2(file, dest / rel)
 

@@ -95,13 +95,9 @@ _FRESH_PER_ALGO: dict[str, dict[str, Any]] = {
 # The general preset's values for every agent (the locks preset starts from them too).
 _GENERAL: dict[str, Any] = {**_CONTROL, **_SMALL_TASK_LEARNER, **_FRESH_POSTERIOR}
 # The general preset's, for Farsighter: the paper's algorithm (BLR head, Thompson draws, k-step
-# targets) on the small-task learner, with five settings of ours, chosen on the exploration
-# suite's selection set and checked on its validation set (SPEC section 6;
-# farsighter/studies/suite.yaml; docs/design.md "How the defaults are chosen"; docs/results/suite).
-# The posterior is over the learned features alone: 512 fixed random features of the observation
-# beside them (blr.random_features 512, the previous default) scored lower on the selection set
-# with 5 seeds (IQM 0.79 [0.67, 0.91] against 0.87 [0.73, 0.98] without) at five times the cost
-# of a step (docs/results/suite/comparisons/random-features).
+# targets) on the small-task learner, with settings of ours, chosen on the exploration suite's
+# selection set and checked on its validation set (SPEC section 6; farsighter/studies/suite.yaml;
+# docs/design.md "How the defaults are chosen"; docs/results/suite).
 # - blr.data_weight 100: each minibatch row weighs 100 x train_every / batch_size in the
 #   incremental statistics, so the mean learns a rarely seen reward from a few of its samples.
 # - blr.redraw k: one draw held for the k steps of the k-step target (Algorithm 2 draws every step).
@@ -120,6 +116,15 @@ _GENERAL: dict[str, Any] = {**_CONTROL, **_SMALL_TASK_LEARNER, **_FRESH_POSTERIO
 #   k-step and the one-step target (max). Selection set, 5 seeds: IQM 0.99 [0.97, 1.00] against
 #   the plain k-step target's 0.87 [0.73, 0.98] (the chain 0.89 against 0.10); validation set,
 #   5 seeds: 0.61 [0.50, 0.70] against 0.61 [0.51, 0.71] (docs/results/suite/comparisons/cut-target).
+# - blr.random_features 32 to blr.random_features_max 1,024, blr.random_features_fit False, and
+#   blr.target_noise_scale 0.5: fixed random features as wide as the observation whose block of
+#   the posterior fits no target, so the values stay the learned features' and the draws widen
+#   where the run has not been (uncertainty about states), the targets' draws at half width.
+#   Selection set, 5 seeds: IQM 0.99 [0.98, 1.00] against 0.99 [0.97, 1.00], mean 0.94 against
+#   0.86 (deep sea 0.90 against 0.53); validation 0.59 [0.49, 0.68] against 0.61 [0.50, 0.70]
+#   (docs/results/suite/comparisons/random-features-uncertainty). Fitted with the learned
+#   features (512 wide, the default before session 47) they made the values local and lost
+#   MiniGrid Empty-5x5 and the chain (comparisons/random-features, random-features-wide).
 _GENERAL_PER_ALGO: dict[str, dict[str, Any]] = {
     **_FRESH_PER_ALGO,
     # RND's bonus at 0.1 of the extrinsic reward, not the RND paper's relative 0.5: selection set,
@@ -192,8 +197,10 @@ PRESETS: dict[str, Preset] = {
             "stays fresh and scaled and whose uncertainty propagates, and (Farsighter) each "
             "row weighing 100 times "
             "its share in the statistics, a draw held for the k steps of its k-step target, "
-            "the targets' draws centred on their minibatch and the k-step return cut before an "
-            "action the posterior mean holds to cost more than 3 steps, chosen on the exploration suite's "
+            "the targets' draws centred on their minibatch, the k-step return cut before an "
+            "action the posterior mean holds to cost more than 3 steps, and random features "
+            "that widen the draws where the run has not been and fit no value, the targets' "
+            "draws at half width, chosen on the exploration suite's "
             "selection set and checked on its validation set (farsighter suite). Reproduce "
             "the paper with --preset control or atari.",
             "Farsighter paper Table 1 (control column) for gamma and the BLR values; the "
