@@ -66,7 +66,7 @@ def test_a_ddqn_policy_file_holds_the_online_network_alone(runs: Any) -> None:
 def test_a_farsighter_policy_file_is_its_networks_and_one_factor_per_action(runs: Any) -> None:
     run, agent = runs["farsighter"]
     a, d = parts(agent).head.num_actions, parts(agent).head.dim
-    assert d == 128  # the defaults: the posterior over the MLP's 128 learned features
+    assert d == 128 + 32  # the defaults: the MLP's 128 learned features and 32 random ones
     bound = _bytes(inner(agent).torso.state_dict()) + 4 * a * d * d + 4 * a * d + 32_000
     size = (run / POLICY_FILE).stat().st_size
     assert size <= bound, (size, bound)
