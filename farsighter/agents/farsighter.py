@@ -53,6 +53,7 @@ from farsighter.agents.farsighter_parts import FarsighterMember, SeedParts
 from farsighter.agents.farsighter_posterior import (
     accumulate,
     fitted_dim,
+    make_head,
     refresh_posterior,
     replay_rows,
     seeded_torso,
@@ -95,7 +96,7 @@ class FarsighterAgent:
         self.torso = seed_network(torsos).to(device)
         torso_target = seed_network([copy.deepcopy(torso) for torso in torsos]).to(device)
         self.parts = [
-            SeedParts(c, self.num_actions, dim, init_AD, device, fit_dim)
+            SeedParts(c, make_head(c, self.num_actions, dim, init_AD, device, fit_dim), device)
             for c, (_, init_AD) in zip(cfgs, built, strict=True)
         ]
         # Eq. 8, with the target features of sampled next states kept until the next copy

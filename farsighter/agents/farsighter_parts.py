@@ -15,7 +15,7 @@ import torch
 
 from farsighter.agents.common import RecentRows, TensorBatch, obs_tensor, set_generator_state
 from farsighter.agents.cuda_graph import Tensors
-from farsighter.agents.farsighter_posterior import RECENT_FEATURES, FarsighterCounters, make_head
+from farsighter.agents.farsighter_posterior import RECENT_FEATURES, FarsighterCounters
 from farsighter.agents.farsighter_targets import (
     Targets,
     advantage,
@@ -28,29 +28,23 @@ from farsighter.agents.seed_members import Member
 from farsighter.config import Config
 from farsighter.exploration import ThompsonExploration
 from farsighter.exploration.optimism import calibrated, without_staying
+from farsighter.ops.blr import BLRHead
 
 Next = tuple[torch.Tensor, torch.Tensor]
 """phi(s') and phi_target(s') of one seed's rows, (B, D) each."""
 
 
 class SeedParts:
-    """One seed's own parts, made and seeded from its config (numpy generator seed + 2, torch
-    generator seed + 3), and its Eq. 8 on given features."""
+    """One seed's own parts around its posterior ``head`` (``farsighter_posterior.make_head``),
+    made and seeded from its config (numpy generator seed + 2, torch generator seed + 3), and
+    its Eq. 8 on given features."""
 
-    def __init__(
-        self,
-        cfg: Config,
-        num_actions: int,
-        dim: int,
-        init_AD: torch.Tensor,
-        device: torch.device,
-        fit_dim: int | None = None,
-    ) -> None:
+    def __init__(self, cfg: Config, head: BLRHead, device: torch.device) -> None:
         self.cfg = cfg
         # the targets (blr.target, k_target), which blr.optimism until-reward switches
         self.blr, self.k_target = cfg.blr, cfg.k_target
         self.calibrated = False  # blr.optimism's switch
-        self.head = make_head(cfg, num_actions, dim, init_AD, device, fit_dim)
+        self.head = head
         self.target_mean_AD = self.head.mean_AD.clone()  # moved by the target copy alone
         self.counters = FarsighterCounters(k=cfg.k)
         # Eq. 7: each environment's weight draw and when it is replaced (blr.redraw)
@@ -61,7 +55,7 @@ class SeedParts:
         self.gen = torch.Generator(device=device)
         self.gen.manual_seed(cfg.seed + 3)
         # phi_target(s') of replay rows (keyed by this seed's streams) until the next copy
-        self.cache = make_target_cache(cfg, device, dim)
+        self.cache = make_target_cache(cfg, device, head.dim)
 
     def calibrate(self) -> None:
         """``blr.optimism = until-reward``'s switch: from now on the posterior mean and the
