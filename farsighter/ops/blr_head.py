@@ -187,6 +187,7 @@ class BLRHead:
             )
         phi_ND = phi_ND.detach().to(device=self.device)
         y_N = y_N.detach().to(device=self.device, dtype=self.stats_dtype)
+        f = self.fit_dim
         for a in range(low, high + 1):  # each action's rows in their order in the minibatch
             rows_M = torch.nonzero(action_N == a).squeeze(1)
             count = rows_M.shape[0]
@@ -195,15 +196,10 @@ class BLRHead:
                 idx_C = rows_M[lo : lo + chunk_size]
                 x_CD = phi_ND.index_select(0, idx_C).to(self.stats_dtype)
                 y_C = y_N.index_select(0, idx_C)
-                f = self.fit_dim
-                if f == self.dim:
-                    self.phiphiT_ADD[a].addmm_(x_CD.T, x_CD)
-                    self.phiy_AD[a].addmv_(x_CD.T, y_C)
-                else:  # two blocks; the second's targets are 0
-                    fit_CF, rest_CR = x_CD[:, :f], x_CD[:, f:]
-                    self.phiphiT_ADD[a, :f, :f].addmm_(fit_CF.T, fit_CF)
-                    self.phiphiT_ADD[a, f:, f:].addmm_(rest_CR.T, rest_CR)
-                    self.phiy_AD[a, :f].addmv_(fit_CF.T, y_C)
+                fit_CF, rest_CR = x_CD[:, :f], x_CD[:, f:]  # the second block's targets are 0
+                self.phiphiT_ADD[a, :f, :f].addmm_(fit_CF.T, fit_CF)
+                self.phiphiT_ADD[a, f:, f:].addmm_(rest_CR.T, rest_CR)  # empty when f = dim
+                self.phiy_AD[a, :f].addmv_(fit_CF.T, y_C)
                 self.yy_A[a] += y_C.square().sum()
 
     @torch.no_grad()

@@ -18,6 +18,7 @@ from farsighter.cli import main
 from farsighter.config import validate
 from farsighter.errors import ConfigError
 from farsighter.networks import MLPTorso, RandomFeatureTorso
+from farsighter.ops.blr import BLRHead
 from farsighter.seeds import batchable
 from tests.conftest import inner
 
@@ -82,14 +83,13 @@ def test_an_online_torso_and_its_target_share_their_random_features(tmp_path: Pa
         assert torch.equal(shared_target, target(obs))
 
 
-LAST: dict[str, Any] = {}
-
-
-def _sd_by_visits(random_features: int, tmp: Path, **overrides: Any) -> tuple[float, float]:
+def _sd_by_visits(
+    random_features: int, tmp: Path, **overrides: Any
+) -> tuple[float, float, BLRHead]:
     """Farsighter on deep sea N = 6 for 600 episodes (learning from step 1,000): the median
     predictive sd of the cells the run never can reach (above the diagonal) and of the six cells
-    it visited most."""
-    n, seen = 6, LAST
+    it visited most, and the trained posterior."""
+    n, seen = 6, {}
 
     class Keep:
         def on_step(self, global_step: int, info: dict[str, Any], agent: Any) -> None:
@@ -117,20 +117,20 @@ def _sd_by_visits(random_features: int, tmp: Path, **overrides: Any) -> tuple[fl
     visits = np.bincount(frames[frames.max(1) > 0].argmax(1), minlength=n * n).reshape(n, n)
     _, var = agent.q_estimate(np.eye(n * n, dtype=np.float32))
     sd = np.sqrt(var).max(1).reshape(n, n)
-    seen["head"] = inner(agent).parts[0].head
     row, col = np.indices((n, n))
     often = visits >= np.sort(visits[col <= row])[-6]  # the six most visited cells
-    return float(np.median(sd[col > row])), float(np.median(sd[often]))
+    head = inner(agent).parts[0].head
+    return float(np.median(sd[col > row])), float(np.median(sd[often])), head
 
 
 def test_with_random_features_the_posterior_is_wide_where_the_run_has_not_been(
     tmp_path: Path,
 ) -> None:
-    unreachable, visited = _sd_by_visits(128, tmp_path)
+    unreachable, visited, _ = _sd_by_visits(128, tmp_path)
     with_random = unreachable / visited
     assert with_random > 2.5  # measured: 3.5 (0.68 against 0.19)
     # over the learned features alone the sd barely follows the visits (measured: 1.2)
-    unreachable, visited = _sd_by_visits(0, tmp_path)
+    unreachable, visited, _ = _sd_by_visits(0, tmp_path)
     assert with_random > 2 * unreachable / visited
 
 
@@ -140,8 +140,7 @@ def test_random_features_that_fit_no_target_widen_the_draws_where_the_run_has_no
     """blr.random_features_fit False: the values are the learned features' alone (the random
     block's mean stays exactly 0), and the random block still widens the draws where the run
     has not been."""
-    unreachable, visited = _sd_by_visits(128, tmp_path, **{"blr.random_features_fit": False})
-    head = LAST["head"]
+    unreachable, visited, head = _sd_by_visits(128, tmp_path, **{"blr.random_features_fit": False})
     assert head.fit_dim == head.dim - 128
     assert torch.count_nonzero(head.mean_AD[:, head.fit_dim :]) == 0
     assert torch.count_nonzero(head.mean_AD[:, : head.fit_dim]) > 0
