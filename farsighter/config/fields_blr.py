@@ -136,16 +136,16 @@ class BLRConfig:
     ends the episode (the chain, tested; deep sea) a run is the run with True bit for bit.
     DoorKey-5x5 with it: 0/3 (docs/design.md). Session 45's general preset set False (with
     ``switch_restart`` refit-zero and ``cut_delay`` 3). Our extension."""
-    cut_delay: float = 0.0
+    cut_delay: float = 3.0
     """With ``Config.k_target = cut`` (now or after the switch): cut a window only where the action
     taken costs more than this many steps of delay, its mean Q below the greedy action's by
     more than cut_delay (1 - gamma) |Q_greedy| (a step's delay costs (1 - gamma) V). In a room
     a wrong turn costs a step or two, which at gamma = 0.99 is a gap of about 0.01 V, below
     what the values resolve, and cutting there shrinks every window to a step; a move that
     ends the episode short of the reward (the chain's) costs all of V and is cut at once. 0:
-    wherever the draw and the mean differ (Watkins). The general
-    preset's Farsighter: 3, with ``Config.k_target = cut`` (selection IQM 0.99 [0.97, 1.00]
-    against 0.91 [0.87, 0.94] at 0; docs/results/suite/comparisons/cut-target). Our extension."""
+    wherever the draw and the mean differ (Watkins). 3, part of the cut as the general preset's
+    Farsighter takes it: selection IQM 0.99 [0.97, 1.00] against 0.91 [0.87, 0.94] at 0
+    (docs/results/suite/comparisons/cut-target). Acts only with the cut. Our extension."""
     advantage_learning: float = 0.0
     """With ``optimism = until-reward``, after its switch: alpha of the advantage-learning
     operator (Baird 1999; Bellemare et al. 2016, "Increasing the Action Gap"), every target
@@ -193,15 +193,16 @@ class BLRConfig:
     observations only: image torsos keep the learned features alone (a run says so on stderr).
     0: the learned features alone (the paper). The general preset's Farsighter: 32, widened to
     the observation up to 1,024 (``random_features_max``), fitting no value
-    (``random_features_fit`` False). Our extension, not the paper's."""
-    random_features_max: int = 0
+    (``random_features_fit`` False), both this mechanism's defaults. Our extension, not the
+    paper's."""
+    random_features_max: int = 1024
     """When above ``random_features``: the random layer widens to the observation's number of
     entries, up to this width. A layer narrower than its input has fewer directions than a
     one-hot observation has states, so once a run has visited about that many states new ones
     stop looking new to the posterior (docs/design.md, "Why a fixed random layer runs out at
     depth"); the cost is O(width^2) a row and O(width^3) a refresh. 0: ``random_features``
-    whatever the observation. Our extension."""
-    random_features_fit: bool = True
+    whatever the observation. Acts only with ``random_features`` above 0. Our extension."""
+    random_features_fit: bool = False
     """Whether the posterior mean fits the random features too. True: one regression over the
     learned and the random features, so the random ones also fit values, state by state (a
     goal's value then reaches no state the run has not taken it from). False: their block of
@@ -209,7 +210,8 @@ class BLRConfig:
     (``BLRHead``'s ``fit_dim``): the values are the learned features' alone, and the random
     block only widens the draws, by up to the prior's width where an observation is new and
     narrowing where the run has been: uncertainty about states, which the learned features,
-    shared across states, do not hold. Our extension."""
+    shared across states, do not hold (the default: comparisons/random-features-uncertainty
+    against random-features-wide). Acts only with ``random_features`` above 0. Our extension."""
     posterior_sampling: Literal["recent", "uniform"] = "recent"
     """Batch-mode refresh tuples: the latest D transitions (Table 1's 'most recent'), or D starts
     drawn uniformly from the whole buffer with replacement (the BDQN authors' code)."""

@@ -138,10 +138,7 @@ _GENERAL_PER_ALGO: dict[str, dict[str, Any]] = {
         "blr.redraw": "k",
         "blr.center_sample": True,
         "k_target": "cut",
-        "blr.cut_delay": 3.0,
         "blr.random_features": 32,
-        "blr.random_features_max": 1024,
-        "blr.random_features_fit": False,
         "blr.target_noise_scale": 0.5,
     },
 }

@@ -190,15 +190,17 @@ def test_a_run_is_told_when_its_observation_outgrows_the_random_layer() -> None:
 
 def test_the_random_layer_widens_to_the_observation_up_to_its_cap() -> None:
     """blr.random_features_max: the layer is as wide as a one-hot observation has entries (deep
-    sea N = 30: 900 cells), never narrower than random_features, never wider than the cap; 0
-    keeps the fixed width (the general preset's), and no random features stays none."""
+    sea N = 30: 900 cells), never narrower than random_features, never wider than the cap (1,024
+    by default); 0 keeps the fixed width, and no random features stays none."""
     from farsighter.agents.farsighter_posterior import seeded_torso
     from farsighter.config import BLRConfig
 
     blr = BLRConfig(random_features=512, random_features_max=1024)
     widths = [blr.random_feature_width(n) for n in (4, 512, 576, 900, 1024, 28_224)]
     assert widths == [512, 512, 576, 900, 1024, 1024]
-    assert BLRConfig(random_features=512).random_feature_width(900) == 512  # no cap: fixed
+    assert BLRConfig(random_features=512).random_feature_width(900) == 900  # the default cap
+    fixed = BLRConfig(random_features=512, random_features_max=0)
+    assert fixed.random_feature_width(900) == 512  # 0: the width as given
     assert BLRConfig(random_features_max=1024).random_feature_width(900) == 0  # none stays none
     cfg = make_config(
         "farsighter",
