@@ -16,7 +16,11 @@ from typing import Any
 
 import yaml
 
-from farsighter.config.presets import PREVIOUS_GENERAL_FARSIGHTER, PREVIOUS_GENERAL_FARSIGHTER_52
+from farsighter.config.presets import (
+    PREVIOUS_GENERAL_FARSIGHTER,
+    PREVIOUS_GENERAL_FARSIGHTER_52,
+    PREVIOUS_GENERAL_FARSIGHTER_53,
+)
 from farsighter.studies.runner import Agent
 
 SUITE_FILE = Path(__file__).with_name("suite.yaml")
@@ -98,6 +102,7 @@ BASES: dict[str, dict[str, Any]] = {
     "": {},
     "session-45": PREVIOUS_GENERAL_FARSIGHTER,
     "session-52": PREVIOUS_GENERAL_FARSIGHTER_52,
+    "session-53": PREVIOUS_GENERAL_FARSIGHTER_53,
 }
 """An agent's ``base`` in a study's file: overrides kept in the library, under its own."""
 AGENT_KEYS = ("algo", "base", "overrides")

@@ -605,8 +605,8 @@ def test_auto_gives_discrete_tasks_the_general_preset_and_keeps_table_1_selectab
     assert cfg.blr.cut_delay == 3.0
     assert (cfg.blr.random_features, cfg.blr.data_weight) == (32, 100.0)
     assert cfg.blr.center_sample and cfg.blr.random_features_max == 1024
-    # the random features widen the draws and fit no value; the targets' draws at half width
-    assert not cfg.blr.random_features_fit and cfg.blr.target_noise_scale == 0.5
+    # the random features widen the draws and fit no value; the targets' draws at full width
+    assert not cfg.blr.random_features_fit and cfg.blr.target_noise_scale == 1.0
     bdqn = make_config("bdqn", "farsighter/Chain10-v0").blr
     assert bdqn.random_feature_width(100) == 0  # no random features: the learned ones alone
     assert make_config("bdqn", "farsighter/Chain10-v0").blr.data_weight == 1.0  # Farsighter's
