@@ -200,8 +200,8 @@ PRESETS: dict[str, Preset] = {
             "its share in the statistics, a draw held for the k steps of its k-step target, "
             "the targets' draws centred on their minibatch, the k-step return cut before an "
             "action the posterior mean holds to cost more than 3 steps, and random features "
-            "that widen the draws where the run has not been and fit no value, the targets' "
-            "draws at half width, chosen on the exploration suite's "
+            "that widen the draws where the run has not been and fit no value, chosen on "
+            "the exploration suite's "
             "selection set and checked on its validation set (farsighter suite). Reproduce "
             "the paper with --preset control or atari.",
             "Farsighter paper Table 1 (control column) for gamma and the BLR values; the "

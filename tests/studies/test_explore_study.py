@@ -200,7 +200,7 @@ def test_agents_are_one_config_each_on_the_auto_preset(tmp_path: Path) -> None:
     assert len({repr(dataclasses.replace(c, run_dir="")) for c in configs}) == len(configs)
     farsighter = configs[StudyConfig().agents.index("Farsighter")]
     assert (farsighter.blr.target, farsighter.k_target) == ("sample", "cut")  # the default's
-    # random features that widen the draws and fit no value, the targets' draws at half width
+    # random features that widen the draws and fit no value
     assert farsighter.blr.random_features == 32 and not farsighter.blr.random_features_fit
     assert farsighter.blr.data_weight == 100.0
     # a variant is the auto preset with its overrides, and the family's evaluation settings
