@@ -435,10 +435,3 @@ def build_seeded(seed: int, fn: Any) -> Any:
     with torch.random.fork_rng(devices=[]):
         torch.manual_seed(seed)
         return fn()
-
-
-def greedy_actions(q_net: nn.Module, obs_E: np.ndarray, device: torch.device) -> np.ndarray:
-    """argmax_a Q(s, a) for a batch of observations. Inference mode (no autograd bookkeeping, no
-    version counters): the Q-values go straight to numpy, so nothing made here is kept."""
-    with torch.inference_mode():
-        return q_net(obs_tensor(obs_E, device)).argmax(dim=1).cpu().numpy()

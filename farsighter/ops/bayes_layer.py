@@ -148,11 +148,6 @@ class BayesianLinear(nn.Module):
         """Posterior standard deviations of the biases, shape (O,), or None without bias."""
         return None if self.bias_rho is None else F.softplus(self.bias_rho)
 
-    def _bias_mu_or_zeros(self) -> Tensor:
-        if self.bias_mu is None:
-            return self.weight_mu.new_zeros(self.out_features)
-        return self.bias_mu
-
     # ------------------------------------------------------------------ moments / KL
     def output_mean_var(self, x_BI: Tensor) -> tuple[Tensor, Tensor]:
         """Exact mean and variance of the output ``x W^T + b`` under q, shape (..., O) each.
