@@ -145,6 +145,30 @@ def stacked_linear(
     return _affine(aligned(x_SBI), aligned(w_SOI), b_SO)
 
 
+UNIT_ROUNDOFF = 2.0**-24
+"""float32's unit roundoff u: a sum of m products rounds, in any order, with or without fused
+multiply-adds, within gamma_m = m u / (1 - m u) of the exact sum of their magnitudes."""
+
+
+def certain_argmax(
+    h_SBI: torch.Tensor, w_SOI: torch.Tensor, b_SO: torch.Tensor
+) -> tuple[torch.Tensor, torch.Tensor]:
+    """The argmax over outputs of ``h W^T + b`` per seed and row, as any float32 evaluation of
+    it ranks them, and where that is certain, (S, B) each. Any evaluation of output o (the
+    batched kernel's here, ``F.linear``'s alone) is within gamma_{I+1} (|h| |W_o| + |b_o|) of
+    the exact value, so two differ by at most twice that, ``e_o``; the batched argmax o* is every
+    evaluation's where ``q_o* - e_o* > q_o + e_o`` for every other o (a tie or a NaN is never
+    certain). The bound is doubled again for the rounding of the bound's own product."""
+    q = torch.baddbmm(b_SO.unsqueeze(1), h_SBI, w_SOI.transpose(1, 2))
+    magnitude = torch.baddbmm(b_SO.abs().unsqueeze(1), h_SBI.abs(), w_SOI.abs().transpose(1, 2))
+    m = h_SBI.shape[2] + 1
+    e = magnitude.mul_(4 * m * UNIT_ROUNDOFF / (1 - m * UNIT_ROUNDOFF))
+    top = q.argmax(dim=2, keepdim=True)
+    low = q.gather(2, top) - e.gather(2, top)
+    high = (q + e).scatter_(2, top, float("-inf"))
+    return top.squeeze(2), (low > high.amax(dim=2, keepdim=True)).squeeze(2)
+
+
 def _affine(x_SBI: torch.Tensor, w_SOI: torch.Tensor, b_SO: torch.Tensor) -> torch.Tensor:
     """``x W^T + b`` per seed (the bias first, then the product added), into an aligned result
     when its plain layout is aligned. Otherwise the result is plain (contiguous): on CPU a batched
@@ -222,22 +246,55 @@ class StackedQNetwork(nn.Module):
         """Q (S, B, A) (features (S, B, D) of torsos) of each seed on its own rows (one seed's
         network alone: :meth:`member_forward`). ``psi_SBW``: the random features of these rows
         when already computed (:meth:`psi`; an online torso and its target share them)."""
-        x = inputs = obs_SB.float().flatten(2)
-        layers = list(zip(self._params[0::2], self._params[1::2], strict=True))
+        inputs = obs_SB.float().flatten(2)
         # one check of the inputs for the first layer and the random layer (ops.onehot)
         wide = (self.rf_weight,) if self.rf_width and psi_SBW is None else ()
         hot = hot_rows(inputs, self._params[0], *wide)
+        x = self._hidden(inputs, hot)
+        weight, bias = self._params[-2:]  # the linear head, or the torso's last layer
+        x = stacked_linear(x, weight, bias, hot if len(self._params) == 2 else None)
         relu = torch.relu if torch.is_grad_enabled() else torch.relu_  # in place: stays aligned
-        for i, (weight, bias) in enumerate(layers[:-1]):  # the torso: ReLU after each layer
-            x = relu(stacked_linear(x, weight, bias, hot if i == 0 else None))
-        weight, bias = layers[-1]  # the linear head, or the torso's last layer
-        x = stacked_linear(x, weight, bias, hot if len(layers) == 1 else None)
         if self.rf_width:  # RandomFeatureTorso.body: [learned features, psi(s)]
             psi = self.random_features(inputs, hot) if psi_SBW is None else psi_SBW
             return aligned(torch.cat([relu(x), psi], dim=2))
         # features: each seed's slice aligned as a tensor alone (the seeds' own products with
         # them round as the agent alone's do)
         return aligned(relu(x)) if self.relu_last else x
+
+    def _hidden(
+        self, x: torch.Tensor, hot: tuple[torch.Tensor, torch.Tensor] | None
+    ) -> torch.Tensor:
+        """The layers before the last, each a ReLU after its product (``x``: the flat inputs)."""
+        relu = torch.relu if torch.is_grad_enabled() else torch.relu_  # in place: stays aligned
+        params = self._params[:-2]
+        for i, (weight, bias) in enumerate(zip(params[0::2], params[1::2], strict=True)):
+            x = relu(stacked_linear(x, weight, bias, hot if i == 0 else None))
+        return x
+
+    @torch.no_grad()
+    def greedy(self, obs: torch.Tensor) -> torch.Tensor:
+        """argmax_a Q(s, a) of each seed's network on its rows of ``obs`` (laid seed after seed),
+        (S * B,): the actions each network alone picks (:meth:`member_forward`, ties to the
+        first). A head product too small for gemm (:data:`SMALL_PRODUCT`: one row by a
+        narrow head, an acting step) is made for every seed at once in the batched kernel, whose
+        rounding differs from ``F.linear``'s, and its argmax kept where it is certain
+        (:func:`certain_argmax`); the seeds with an uncertain row take ``F.linear``, as
+        :func:`stacked_linear` does. On CUDA (where a product may round in TF32) the forward
+        itself."""
+        weight, bias = self._params[-2:]
+        obs_SB = self.by_seed(obs)
+        rows, inner, A = obs_SB.shape[1], weight.shape[2], weight.shape[1]
+        if self.relu_last or weight.is_cuda or rows * inner * A >= SMALL_PRODUCT:
+            return self(obs_SB).argmax(dim=2).flatten()
+        inputs = obs_SB.float().flatten(2)
+        h = self._hidden(inputs, hot_rows(inputs, self._params[0]))
+        actions_SB, sure_SB = certain_argmax(h, weight, bias)
+        unsure = (~sure_SB).any(dim=1).nonzero().flatten().tolist()
+        if unsure:
+            h, weight = aligned(h), aligned(weight)  # as stacked_linear's seed-by-seed path
+            for s in unsure:
+                actions_SB[s] = F.linear(h[s], weight[s], bias[s]).argmax(dim=1)
+        return actions_SB.flatten()
 
     def rows(self, obs: torch.Tensor) -> torch.Tensor:
         """:meth:`forward` on the seeds' rows laid end to end, seed 0's first: (S * B, ...) in,
@@ -330,6 +387,11 @@ class OneSeed(nn.Module):
         return self.net(obs)  # type: ignore[no-any-return]
 
     seeds = 1
+
+    @torch.no_grad()
+    def greedy(self, obs: torch.Tensor) -> torch.Tensor:
+        """argmax_a Q(s, a) of the network alone on ``obs``, (B,)."""
+        return self.net(obs).argmax(dim=1)  # type: ignore[no-any-return]
 
     def by_seed(self, rows: torch.Tensor) -> torch.Tensor:
         return rows.unsqueeze(0)

@@ -115,7 +115,7 @@ class DDQNAgent:
         """argmax_a Q(s, a) of every seed's network on its own observations, (S, E)."""
         with torch.inference_mode():
             obs = obs_tensor(obs_S[0] if self.seeds == 1 else np.concatenate(obs_S), self.device)
-            return self.q.rows(obs).argmax(dim=1).view(self.seeds, -1).cpu().numpy()
+            return self.q.greedy(obs).view(self.seeds, -1).cpu().numpy()
 
     def act(self, obs_S: Sequence[np.ndarray], global_step: int) -> np.ndarray:
         """Each seed's epsilon-greedy actions from its own generator (:func:`epsilon_greedy`),

@@ -23,10 +23,11 @@ from farsighter.algorithms import seed_batched
 from farsighter.cli import main
 from farsighter.config.presets import PREVIOUS_GENERAL_FARSIGHTER
 from farsighter.errors import ConfigError
+from farsighter.networks import QNetwork
 from farsighter.replay import ReplayBuffer
 from farsighter.replay.seeds import SeedReplay
 from farsighter.seeds import batchable, seed_configs, train_seeds
-from farsighter.stacked import stacked_linear
+from farsighter.stacked import StackedQNetwork, certain_argmax, stacked_linear
 from farsighter.train import train
 
 SEEDS = (3, 5, 8)
@@ -395,6 +396,39 @@ def test_stacked_linear_is_f_linear_per_seed(rows: int) -> None:
                 assert torch.equal(xs.grad[s], xa.grad), where
                 assert torch.equal(ws.grad[s], wa.grad), where
                 assert torch.equal(bs.grad[s], ba.grad), where
+
+
+def test_stacked_greedy_actions_are_each_network_alones() -> None:
+    """Each seed's greedy actions from the stacked networks (the head's small product batched,
+    its argmax kept where certain) are its network's alone, over inputs of magnitudes 1e-3 to
+    1e2 and heads whose two rows nearly tie (the batched kernel and F.linear may rank those
+    otherwise): those rows are never certain and take F.linear, the rest are."""
+    S, A, obs_space = 8, 2, gym.spaces.Box(-1.0, 1.0, (4,), np.float32)
+    nets = []
+    for s in range(S):
+        torch.manual_seed(s)
+        nets.append(QNetwork(obs_space, A, (120, 84)))
+    with torch.no_grad():  # seeds 0-3: rows 0 and 1 equal but for a last bit of one weight
+        for net in nets[:4]:
+            head = net.head
+            head.weight[1].copy_(head.weight[0])
+            head.bias[1].copy_(head.bias[0])
+            head.weight[1, 0] = torch.nextafter(head.weight[0, 0], torch.tensor(1.0))
+    stacked = StackedQNetwork(nets)
+    g = torch.Generator().manual_seed(0)
+    uncertain = 0
+    for scale in (1e-3, 1e-1, 1.0, 1e2):
+        for _ in range(50):
+            obs = torch.randn(S, 4, generator=g) * scale
+            with torch.inference_mode():
+                got = stacked.greedy(obs)
+                alone = [int(net(obs[s : s + 1]).argmax(dim=1)) for s, net in enumerate(nets)]
+                h = stacked._hidden(obs.view(S, 1, 4), None)
+                _, sure = certain_argmax(h, *stacked._params[-2:])
+            assert got.tolist() == alone
+            uncertain += int((~sure[:4]).sum())
+            assert bool(sure[4:].all())  # the networks whose rows are apart: batched
+    assert uncertain == 4 * 200  # the near ties: every one taken from F.linear
 
 
 def test_seed_replay_samples_each_seed_as_its_replay_alone() -> None:
