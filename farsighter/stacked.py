@@ -148,6 +148,8 @@ def stacked_linear(
 UNIT_ROUNDOFF = 2.0**-24
 """float32's unit roundoff u: a sum of m products rounds, in any order, with or without fused
 multiply-adds, within gamma_m = m u / (1 - m u) of the exact sum of their magnitudes."""
+SMALLEST_NORMAL = 2.0**-126
+"""float32's smallest normal number: the most a product or a sum loses when flushed to zero."""
 
 
 def certain_argmax(
@@ -158,11 +160,15 @@ def certain_argmax(
     batched kernel's here, ``F.linear``'s alone) is within gamma_{I+1} (|h| |W_o| + |b_o|) of
     the exact value, so two differ by at most twice that, ``e_o``; the batched argmax o* is every
     evaluation's where ``q_o* - e_o* > q_o + e_o`` for every other o (a tie or a NaN is never
-    certain). The bound is doubled again for the rounding of the bound's own product."""
+    certain). The bound is doubled again for the rounding of the bound's own product, and each
+    of the I + 1 operations may add float32's smallest normal (a kernel that flushes subnormal
+    results to zero)."""
     q = torch.baddbmm(b_SO.unsqueeze(1), h_SBI, w_SOI.transpose(1, 2))
     magnitude = torch.baddbmm(b_SO.abs().unsqueeze(1), h_SBI.abs(), w_SOI.abs().transpose(1, 2))
     m = h_SBI.shape[2] + 1
-    e = magnitude.mul_(4 * m * UNIT_ROUNDOFF / (1 - m * UNIT_ROUNDOFF))
+    e = magnitude.mul_(4 * m * UNIT_ROUNDOFF / (1 - m * UNIT_ROUNDOFF)).add_(
+        4 * m * SMALLEST_NORMAL
+    )
     top = q.argmax(dim=2, keepdim=True)
     low = q.gather(2, top) - e.gather(2, top)
     high = (q + e).scatter_(2, top, float("-inf"))
