@@ -73,7 +73,8 @@ def fill(
 
 def filled_agent(cfg: Any, batch_size: int, transitions: int) -> Any:
     """The config's agent with ``batch_size`` rows a minibatch, its replay filled with
-    ``transitions`` steps of uniform actions in the task's own environment."""
+    ``transitions`` steps of uniform actions in the task's own environment: the seed-axis agent
+    of one seed (what ``build_agent`` wraps as a ``Sole``), whose ``update`` is one update."""
     from farsighter.agents import build_agent
     from farsighter.envs import frame_stack_of, make_vector_env
 
@@ -87,7 +88,7 @@ def filled_agent(cfg: Any, batch_size: int, transitions: int) -> Any:
         device=torch.device("cpu"),
     )
     fill([envs], [cfg], lambda steps: agent.observe(steps[0]), transitions)
-    return agent
+    return getattr(agent, "agents", agent)
 
 
 def filled_batch(cfg: Any, seeds: int, transitions: int) -> Any:
