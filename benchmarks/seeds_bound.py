@@ -72,23 +72,23 @@ def fill(
 
 
 def filled_agent(cfg: Any, batch_size: int, transitions: int) -> Any:
-    """The config's agent with ``batch_size`` rows a minibatch, its replay filled with
-    ``transitions`` steps of uniform actions in the task's own environment: the seed-axis agent
-    of one seed (what ``build_agent`` wraps as a ``Sole``), whose ``update`` is one update."""
-    from farsighter.agents import build_agent
+    """The config's agent over a seed axis of one (``build_seed_agents``: its ``update`` is one
+    update) with ``batch_size`` rows a minibatch, its replay filled with ``transitions`` steps
+    of uniform actions in the task's own environment."""
+    from farsighter.agents import build_seed_agents
     from farsighter.envs import frame_stack_of, make_vector_env
 
     cfg = dataclasses.replace(cfg, batch_size=batch_size)
     envs = make_vector_env(cfg, seed=cfg.seed)
-    agent = build_agent(
-        cfg,
+    agent = build_seed_agents(
+        [cfg],
         envs.single_observation_space,
         envs.single_action_space,
         frame_stack=frame_stack_of(cfg),
         device=torch.device("cpu"),
     )
-    fill([envs], [cfg], lambda steps: agent.observe(steps[0]), transitions)
-    return getattr(agent, "agents", agent)
+    fill([envs], [cfg], agent.observe, transitions)
+    return agent
 
 
 def filled_batch(cfg: Any, seeds: int, transitions: int) -> Any:

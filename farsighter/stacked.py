@@ -285,12 +285,12 @@ class StackedQNetwork(nn.Module):
         narrow head, an acting step) is made for every seed at once in the batched kernel, whose
         rounding differs from ``F.linear``'s, and its argmax kept where it is certain
         (:func:`certain_argmax`); the seeds with an uncertain row take ``F.linear``, as
-        :func:`stacked_linear` does. On CUDA (where a product may round in TF32) the forward
-        itself."""
+        :func:`stacked_linear` does. Off a CPU (CUDA may round a product in TF32) the
+        forward itself."""
         weight, bias = self._params[-2:]
         obs_SB = self.by_seed(obs)
         rows, inner, A = obs_SB.shape[1], weight.shape[2], weight.shape[1]
-        if self.relu_last or weight.is_cuda or rows * inner * A >= SMALL_PRODUCT:
+        if self.relu_last or weight.device.type != "cpu" or rows * inner * A >= SMALL_PRODUCT:
             return self(obs_SB).argmax(dim=2).flatten()
         inputs = obs_SB.float().flatten(2)
         h = self._hidden(inputs, hot_rows(inputs, self._params[0]))
