@@ -15,6 +15,7 @@ from typing import Annotated
 import tyro
 
 from farsighter import jsonio
+from farsighter.cli_args import parse_flags
 from farsighter.config import Config, load_config, make_config, resolve_preset_name
 from farsighter.errors import ConfigError, FarsighterError, Interrupted, RunDirError
 from farsighter.rundir import CONFIG_FILE, check_same_run
@@ -115,7 +116,7 @@ def train_config(argv: Sequence[str]) -> Config:
     is refused by :func:`farsighter.rundir.prepare_run_dir`.
     """
     prog = "farsighter train"
-    lead, _ = tyro.cli(TrainLead, args=_without_help(argv), prog=prog, return_unknown_args=True)
+    lead, _ = parse_flags(TrainLead, _without_help(argv), prog, return_unknown_args=True)
     if lead.resume:
         path = (
             Path(lead.run_dir)
@@ -133,7 +134,7 @@ def train_config(argv: Sequence[str]) -> Config:
         default = make_config(lead.algo, lead.env, lead.preset)
         description = "Train an agent. --algo, --env and --preset pick the defaults; any other "
         description += "field below overrides them. --resume continues a run with its saved config."
-    cfg = tyro.cli(Config, default=default, args=list(argv), prog=prog, description=description)
+    cfg = parse_flags(Config, argv, prog, default=default, description=description)
     if lead.resume:  # another --algo or --env: said so before a preset or a check that follows
         check_same_run(cfg, saved=default)
     if cfg.preset != default.preset:  # given again: store the resolved name, as make_config does
@@ -177,7 +178,9 @@ def _train_command(argv: Sequence[str]) -> int:
         summary = train(train_config(rest))
         print(jsonio.dumps(summary))
         return 0
-    lead, _ = tyro.cli(TrainLead, args=_without_help(rest), return_unknown_args=True)
+    lead, _ = parse_flags(
+        TrainLead, _without_help(rest), "farsighter train", return_unknown_args=True
+    )
     if lead.resume:  # each seed's saved config, from its own directory
         dirs = [c.run_dir for c in seed_configs(Config(run_dir=lead.run_dir), seeds)]
         cfgs = [
@@ -199,7 +202,7 @@ def cmd_eval(argv: Sequence[str]) -> int:
     from farsighter.session import EVAL_MAX_ENVS
     from farsighter.train import evaluate_episodes, load_agent
 
-    args = tyro.cli(EvalArgs, args=list(argv), prog="farsighter eval")
+    args = parse_flags(EvalArgs, argv, "farsighter eval")
     if args.episodes < 1:
         raise FarsighterError(f"--episodes must be >= 1 (got {args.episodes})")
     if args.render and args.render not in RENDER_MODES:
@@ -245,7 +248,7 @@ def cmd_eval(argv: Sequence[str]) -> int:
 def cmd_plot(argv: Sequence[str]) -> int:
     from farsighter.plots import plot_run
 
-    args = tyro.cli(PlotArgs, args=list(argv), prog="farsighter plot")
+    args = parse_flags(PlotArgs, argv, "farsighter plot")
     print(plot_run(args.run_dir, args.out))
     return 0
 
@@ -272,7 +275,7 @@ def cmd_presets(argv: Sequence[str]) -> int:
     from farsighter import algorithms
     from farsighter.config import PRESETS, explain_config, resolve_preset_name
 
-    args = tyro.cli(PresetsArgs, args=list(argv), prog="farsighter presets")
+    args = parse_flags(PresetsArgs, argv, "farsighter presets")
     if args.algo:
         rows = explain_config(args.algo, args.env, args.preset)
         name = resolve_preset_name(args.preset, args.env, args.algo)

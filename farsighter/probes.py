@@ -41,6 +41,7 @@ import numpy as np
 import tyro
 
 from farsighter import jsonio
+from farsighter.cli_args import parse_flags
 from farsighter.errors import ConfigError, EnvError, FarsighterError
 
 MAX_STEPS = 100
@@ -375,7 +376,7 @@ def main(argv: Sequence[str]) -> int:
     probe = PROBES.get(args[0])
     if probe is None:
         raise FarsighterError(f"unknown probe '{args[0]}'; accepted: {', '.join(PROBES)}")
-    parsed: Any = tyro.cli(probe.args, args=args[1:], prog=f"farsighter inspect {args[0]}")
+    parsed: Any = parse_flags(probe.args, args[1:], f"farsighter inspect {args[0]}")
     if not parsed.runs:
         raise FarsighterError(f"inspect {args[0]} needs one or more run directories (RUN_DIR)")
     settings = {k: v for k, v in asdict(parsed).items() if k not in ("runs", "out")}

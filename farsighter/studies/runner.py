@@ -26,6 +26,7 @@ import numpy as np
 import tyro
 
 from farsighter import jsonio
+from farsighter.cli_args import parse_flags
 from farsighter.config import Config, make_config, validate
 from farsighter.errors import ConfigError, FarsighterError
 from farsighter.provenance import code_version
@@ -265,7 +266,7 @@ def backend_of(args: StudyArgs, workers: int) -> Backend:
 def parse(study: Study, argv: Sequence[str]) -> StudyArgs:
     """The command's flags (tyro: a bad value or an unknown flag exits with 2)."""
     prog = f"farsighter {study.kind}"
-    return tyro.cli(study.args, args=list(argv), prog=prog, description=_help(study))
+    return parse_flags(study.args, argv, prog, description=_help(study))
 
 
 def out_dir(study: Study, settings: Any, args: StudyArgs) -> Path:

@@ -32,6 +32,7 @@ import numpy as np
 import tyro
 
 from farsighter import jsonio
+from farsighter.cli_args import parse_flags
 from farsighter.errors import FarsighterError
 from farsighter.rundir import CHECKPOINT_FILE, EVAL_FILE, SUMMARY_FILE
 from farsighter.sweep.engine import (
@@ -73,7 +74,7 @@ class SweepArgs:
 
 
 def main(argv: Sequence[str]) -> int:
-    args = tyro.cli(SweepArgs, args=list(argv), prog="farsighter sweep")
+    args = parse_flags(SweepArgs, argv, "farsighter sweep")
     spec = load_spec(args.spec)
     out = Path(args.out) if args.out else spec.default_dir
     if args.ray and args.local:

@@ -115,6 +115,39 @@ def test_bad_input_is_one_line_exit_2(tmp_path: Path, args: list[str], needle: s
     assert not (tmp_path / "run").exists()  # nothing created
 
 
+@pytest.mark.parametrize(
+    ("args", "needle"),
+    [
+        (
+            ["train", "--totl-steps", "5"],
+            "Unrecognized options: --totl-steps, 5; did you mean --total-steps?",
+        ),
+        (["train", "--optimizer", "sgd"], "Expected one of ('rmsprop', 'adam')"),
+        (["train", "--seed", "1.5"], "'1.5' (expected --seed INT)"),
+        (["train", "--algo", "ddqn", "--lr"], "Missing value for argument '--lr'"),
+        (["train", "--seeds", "1", "2", "--num-envs", "x"], "(expected --num-envs INT)"),
+        (["suite", "--sett", "all"], "did you mean --set?"),
+        (["eval", "run", "--episodes", "z"], "(expected --episodes INT)"),
+        (["inspect", "action-gaps", "--bogus"], "Unrecognized options: --bogus"),
+        (["sweep"], "Missing from farsighter sweep"),
+    ],
+)
+def test_flags_tyro_cannot_read_are_one_line_exit_2(
+    args: list[str], needle: str, capsys: pytest.CaptureFixture[str]
+) -> None:
+    """An unknown flag, a value of the wrong type, a missing value: tyro's framed message comes
+    out as one line naming the flag (and the one meant), exit 2, for every command."""
+    from farsighter.cli import main
+
+    assert main(args) == 2
+    err = capsys.readouterr().err
+    lines = err.strip().splitlines()
+    assert len(lines) == 1 and lines[0].startswith("farsighter: error: "), err
+    assert needle in lines[0] and lines[0].endswith(
+        f"{' '.join(args[: 2 if args[0] == 'inspect' else 1])} --help lists the flags"
+    ), err
+
+
 def test_run_dir_that_cannot_be_created_is_one_line_exit_2(tmp_path: Path) -> None:
     (tmp_path / "afile").write_text("not a directory")
     for run_dir, needle in [

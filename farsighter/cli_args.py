@@ -1,0 +1,65 @@
+"""Every command's flags through tyro, its parse errors as one line.
+
+tyro answers an unknown flag, a bad value or a missing one with a framed message of several
+lines and exit 2. :func:`parse_flags` raises that message as one :class:`ConfigError` line instead
+(what was wrong, what is accepted, the flag it may have meant), which the CLI prints as
+``farsighter: error: ...`` with exit 2, as it does every other bad input.
+"""
+
+from __future__ import annotations
+
+import contextlib
+import io
+import sys
+from collections.abc import Sequence
+from typing import Any, TypeVar
+
+import tyro
+
+from farsighter.errors import ConfigError
+
+T = TypeVar("T")
+
+
+def parse_flags(cls: type[T], argv: Sequence[str], prog: str, **kwargs: Any) -> Any:
+    """``tyro.cli(cls, args=argv, prog=prog, **kwargs)`` (its value, a tuple with
+    ``return_unknown_args``); a parse error raises :class:`ConfigError` with tyro's message on one
+    line. ``--help`` prints as tyro prints it."""
+    args = list(argv)
+    if "-h" in args or "--help" in args:
+        return tyro.cli(cls, args=args, prog=prog, **kwargs)
+    captured = io.StringIO()
+    try:
+        with contextlib.redirect_stderr(captured):
+            value = tyro.cli(cls, args=args, prog=prog, **kwargs)
+    except SystemExit as exc:
+        if exc.code in (0, None):
+            raise
+        raise ConfigError(one_line(captured.getvalue(), prog)) from None
+    sys.stderr.write(captured.getvalue())  # a warning of a parse that succeeded
+    return value
+
+
+def one_line(message: str, prog: str) -> str:
+    """tyro's framed error message as one line: its first section, the accepted form of the
+    flag a value was refused for, the flags it suggests, and where the flags are listed."""
+    sections: list[list[str]] = []
+    for raw in message.splitlines():
+        line = raw.strip().strip("│").strip()
+        # a section starts below a rule, or below the frame's top, which holds the title (in
+        # plain text the title stands above the first rule)
+        if line.startswith("╭") or (line and set(line) <= set("-─")):
+            sections.append([])
+        elif line and sections and not line.startswith("╰"):
+            sections[-1].append(line)
+    if not sections or not sections[0]:
+        return f"cannot read the command line ({' '.join(message.split())[:200]})"
+    text = " ".join(sections[0]).rstrip(".")
+    for section in (s for s in sections[1:] if s):
+        head, rest = section[0].rstrip(":"), section[1:]
+        flags = [line.split()[0] for line in rest if line.startswith("-")]
+        if head == "Argument helptext" and rest:
+            text += f" (expected {' '.join(rest[0].split()[:2])})"
+        elif head == "Perhaps you meant" and flags:
+            text += f"; did you mean {' or '.join(dict.fromkeys(flags))}?"
+    return f"{text}; {prog} --help lists the flags"
