@@ -69,11 +69,13 @@ class Model:
         )
 
     # ------------------------------------------------------------------ training
-    def learn(self, total_steps: int, progress: bool = True) -> Model:
+    def learn(self, total_steps: int | float, progress: bool = True) -> Model:
         """Train for ``total_steps`` more environment steps (the first call from scratch, each
         later one resuming the run where it stopped); returns the model."""
-        if total_steps < 1:
-            raise ConfigError(f"total_steps must be >= 1 (got {total_steps})")
+        if isinstance(total_steps, float) and total_steps.is_integer():
+            total_steps = int(total_steps)  # learn(1e5)
+        if not isinstance(total_steps, int) or isinstance(total_steps, bool) or total_steps < 1:
+            raise ConfigError(f"total_steps must be an integer >= 1 (got {total_steps!r})")
         if self.num_steps == 0:
             path = self._fresh_run_dir()
             cfg = dataclasses.replace(

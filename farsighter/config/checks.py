@@ -8,6 +8,7 @@ from __future__ import annotations
 import math
 
 from farsighter import algorithms
+from farsighter.config.field_types import OPEN_CHOICES, field_value, leaf_fields
 from farsighter.config.fields import Config
 from farsighter.config.presets import flat_fields, is_atari_id
 from farsighter.errors import ConfigError
@@ -15,15 +16,34 @@ from farsighter.errors import ConfigError
 
 def validate(cfg: Config) -> None:
     """Raise :class:`ConfigError` with one line naming the first problem and what is accepted."""
+    _check_types(cfg)
     spec = algorithms.get(cfg.algo)
     sections = (cfg, cfg.runtime, cfg.atari, cfg.blr, cfg.adaptive_k, cfg.ob2i, cfg.rnd, cfg.naf)
     for checks in (*(s.checks() for s in sections), _algorithm_checks(cfg, spec)):
         for ok, message in checks:
             if not ok:
                 raise ConfigError(message)
+    for name, value in flat_fields(cfg):  # named choices no section's check above names
+        want = "" if name in OPEN_CHOICES else field_value(name, value, convert=False)[1]
+        if want:
+            raise ConfigError(f"{name} must be {want} (got {value!r})")
     for name, value in flat_fields(cfg):  # config.json is strict JSON: no NaN or Infinity
         if isinstance(value, float) and not math.isfinite(value):
             raise ConfigError(f"{name} must be a finite number (got {value})")
+
+
+def _check_types(cfg: Config) -> None:
+    """Every field holds a value of its type (a config built with ``dataclasses.replace`` or by
+    hand is checked as ``make_config`` checks keywords), before a check compares it."""
+    leaves, sections = leaf_fields()
+    for name, cls in sections.items():
+        if not isinstance(getattr(cfg, name), cls):
+            got = getattr(cfg, name)
+            raise ConfigError(f"{name} must be a {cls.__name__} (got {got!r})")
+    for name, value in flat_fields(cfg):
+        want = field_value(name, value, convert=False, choices=False)[1]
+        if want:
+            raise ConfigError(f"{name} must be {want} (got {value!r})")
 
 
 def _algorithm_checks(cfg: Config, spec: algorithms.Algorithm) -> list[tuple[bool, str]]:

@@ -4,11 +4,13 @@
 from __future__ import annotations
 
 import dataclasses
+import difflib
 import math
 from dataclasses import dataclass, field
 from typing import Any, cast
 
 from farsighter import algorithms
+from farsighter.config.field_types import field_value, leaf_fields
 from farsighter.config.fields import Config, RuntimeConfig
 from farsighter.errors import ConfigError
 
@@ -449,6 +451,37 @@ def flat_fields(obj: Any, prefix: str = "") -> list[tuple[str, Any]]:
     return rows
 
 
+def _checked(overrides: dict[str, Any]) -> dict[str, Any]:
+    """Keyword overrides as dotted fields with their fields' types (``blr={"prior_std": 2}`` is
+    ``blr.prior_std``; ``total_steps=1e5`` is 100000); a value a field cannot take is refused
+    in one line."""
+    leaves, sections = leaf_fields()
+    out: dict[str, Any] = {}
+    for key, value in overrides.items():
+        key = runtime_key(key.replace("__", "."))
+        if key in sections:  # a section's fields, each over the preset's value for it
+            if isinstance(value, sections[key]):
+                value = {f.name: getattr(value, f.name) for f in dataclasses.fields(value)}
+            if not isinstance(value, dict):
+                raise ConfigError(
+                    f"{key} must be a {sections[key].__name__} or a dict of its fields "
+                    f"(got {value!r})"
+                )
+            out.update(_checked({f"{key}.{sub}": v for sub, v in value.items()}))
+            continue
+        if key not in leaves:
+            close = difflib.get_close_matches(key, list(leaves), n=1)
+            raise ConfigError(
+                f"unknown config field '{key}'"
+                + (f" (did you mean '{close[0]}'?)" if close else "")
+            )
+        value, want = field_value(key, value, choices=False)
+        if want:
+            raise ConfigError(f"{key} must be {want} (got {value!r})")
+        out[key] = value
+    return out
+
+
 def _nested_replace(obj: Any, dotted: dict[str, Any]) -> Any:
     """``dataclasses.replace`` with dotted keys for nested dataclasses; unknown keys raise."""
     direct: dict[str, Any] = {}
@@ -537,7 +570,7 @@ def make_config(
     values: dict[str, Any] = {}
     for _, layer in config_layers(algo, env, preset):
         values.update(layer)
-    values.update({runtime_key(k.replace("__", ".")): v for k, v in overrides.items()})
+    values.update(_checked(overrides))
     values.update({"algo": algo, "env": env, "preset": resolve_preset_name(preset, env, algo)})
     return _nested_replace(Config(), values)
 

@@ -34,6 +34,7 @@ import numpy as np
 import torch
 
 from farsighter.config import Config
+from farsighter.errors import ConfigError
 from farsighter.exploration.revisit import EpisodeVisits
 from farsighter.ops.blr import BLRHead, ThompsonDraws
 
@@ -120,6 +121,10 @@ class ThompsonExploration:
         self.head, self.counters = head, counters
         self.num_envs = cfg.num_envs
         self.keep_acting_draw = cfg.blr.target == "thompson"  # the Q-loss reuses it
+        if cfg.blr.redraw not in SCHEDULES:  # the config's check leaves this registry's names
+            raise ConfigError(
+                f"blr.redraw '{cfg.blr.redraw}' is no schedule; accepted: {', '.join(SCHEDULES)}"
+            )
         self.schedule = SCHEDULES[cfg.blr.redraw](cfg, counters)
         self.draws = ThompsonDraws(head)  # the draws of a per-step schedule, a block ahead
         self.w_EAD: torch.Tensor | None = None  # the held draws (and the latest acting draw)

@@ -84,16 +84,15 @@ from __future__ import annotations
 
 import dataclasses
 import difflib
-import functools
 import itertools
-import typing
 from collections.abc import Callable, Mapping
 from dataclasses import dataclass
 from pathlib import Path
-from typing import Any, Literal, NoReturn
+from typing import Any, NoReturn
 
 from farsighter import algorithms
 from farsighter.config import Config, make_config, validate
+from farsighter.config.field_types import field_value, leaf_fields
 from farsighter.config.presets import runtime_key
 from farsighter.errors import ConfigError, FarsighterError
 from farsighter.rundir import slug
@@ -478,29 +477,10 @@ def _resources(raw: Any, source: str) -> Resources:
 # --------------------------------------------------------------------------------------------
 
 
-@functools.cache
-def _fields() -> tuple[dict[str, Any], frozenset[str]]:
-    """Every leaf field of Config, dotted for nested ones, with its type; and the names of the
-    nested groups (blr, adaptive_k, ...)."""
-    leaves: dict[str, Any] = {}
-    groups: set[str] = set()
-    hints = typing.get_type_hints(Config)
-    for f in dataclasses.fields(Config):
-        hint = hints[f.name]
-        if dataclasses.is_dataclass(hint):
-            groups.add(f.name)
-            sub_hints = typing.get_type_hints(hint)
-            for sub in dataclasses.fields(hint):
-                leaves[f"{f.name}.{sub.name}"] = sub_hints[sub.name]
-        else:
-            leaves[f.name] = hint
-    return leaves, frozenset(groups)
-
-
 def _flatten(raw: Mapping[Any, Any], section: str, source: str, *, lists: bool) -> dict[str, Any]:
     """Check a section's keys as Config fields; nested tables (TOML's ``[set.blr]`` or unquoted
     ``blr.noise_std = ...``) become dotted keys. ``lists``: the grid, where values are lists."""
-    leaves, groups = _fields()
+    leaves, groups = leaf_fields()
     out: dict[str, Any] = {}
     for key, value in raw.items():
         if not isinstance(key, str):
@@ -534,41 +514,11 @@ def _flatten(raw: Mapping[Any, Any], section: str, source: str, *, lists: bool) 
 
 
 def _coerce(value: Any, key: str, where: str, source: str) -> Any:
-    """Check a value against its field's type; lists become tuples for tuple fields, and
-    strings that read as numbers (YAML 1.1's ``1e-4``) become floats for float fields."""
-    hint = _fields()[0][key]
-    origin = typing.get_origin(hint)
-    ok = True
-    want = ""
-    if hint is bool:
-        ok, want = isinstance(value, bool), "true or false"
-    elif hint is int:
-        ok, want = isinstance(value, int) and not isinstance(value, bool), "an integer"
-    elif hint is float:
-        if isinstance(value, str):
-            try:
-                value = float(value)
-            except ValueError:
-                pass
-        ok = isinstance(value, (int, float)) and not isinstance(value, bool)
-        want = "a number"
-    elif hint is str:
-        ok, want = isinstance(value, str), "a string"
-    elif origin is Literal:
-        choices = typing.get_args(hint)
-        ok = isinstance(value, str) and value in choices
-        want = "one of " + ", ".join(map(str, choices))
-    elif origin is tuple:
-        if isinstance(value, (list, tuple)):
-            value = tuple(value)
-        ok = isinstance(value, tuple) and all(
-            isinstance(v, int) and not isinstance(v, bool) for v in value
-        )
-        want = "a list of integers" + (
-            " (one list per grid value)" if where.startswith("grid.") else ""
-        )
-    if not ok:
-        raise SweepError(f"{source}: {where} must be {want} (got {value!r})")
+    """A value as its field takes it (:func:`farsighter.config.field_types.field_value`)."""
+    value, want = field_value(key, value)
+    if want:
+        grid = " (one list per grid value)" if where.startswith("grid.") and "list" in want else ""
+        raise SweepError(f"{source}: {where} must be {want}{grid} (got {value!r})")
     return value
 
 
