@@ -6,6 +6,7 @@ Bad input prints one line, ``farsighter: error: <what> ...(accepted: ...)``, and
 from __future__ import annotations
 
 import dataclasses
+import os
 import sys
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass
@@ -391,6 +392,9 @@ def main(argv: Sequence[str] | None = None) -> int:
     except KeyboardInterrupt:
         print("farsighter: interrupted; continue the run with --resume", file=sys.stderr)
         return 130
+    except BrokenPipeError:  # `farsighter train --help | head`: the reader left, quietly
+        os.dup2(os.open(os.devnull, os.O_WRONLY), sys.stdout.fileno())  # (the exit's flush)
+        return 141  # 128 + SIGPIPE, as a shell reports a writer whose reader left
 
 
 if __name__ == "__main__":

@@ -54,7 +54,10 @@ def one_line(message: str, prog: str) -> str:
             sections[-1].append(line)
     if not sections or not sections[0]:
         return f"cannot read the command line ({' '.join(message.split())[:200]})"
-    text = " ".join(sections[0]).rstrip(".")
+    first = sections[0]
+    if first[0].startswith("Missing from") and len(first) > 1:  # a required argument
+        first = [f"missing {first[1]}:", *first[2:]]
+    text = " ".join(first).rstrip(".")
     for section in (s for s in sections[1:] if s):
         head, rest = section[0].rstrip(":"), section[1:]
         flags = [line.split()[0] for line in rest if line.startswith("-")]

@@ -48,10 +48,10 @@ from farsighter.sweep.spec import SweepError, SweepSpec, Trial, load_spec
 
 @dataclass(frozen=True)
 class SweepArgs:
-    """farsighter sweep SPEC: run every trial of a sweep file (TOML or YAML; format:
+    """farsighter sweep FILE: run every trial of a sweep file (TOML or YAML; format:
     farsighter.sweep.spec), locally or on Ray, then aggregate the results."""
 
-    spec: tyro.conf.Positional[str]
+    spec: Annotated[str, tyro.conf.Positional, tyro.conf.arg(metavar="FILE")]
     """The sweep file."""
     out: Annotated[str | None, tyro.conf.arg(metavar="DIR")] = None
     """Sweep directory (default: sweeps/<name>)."""

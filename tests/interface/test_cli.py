@@ -129,7 +129,8 @@ def test_bad_input_is_one_line_exit_2(tmp_path: Path, args: list[str], needle: s
         (["suite", "--sett", "all"], "did you mean --set?"),
         (["eval", "run", "--episodes", "z"], "(expected --episodes INT)"),
         (["inspect", "action-gaps", "--bogus"], "Unrecognized options: --bogus"),
-        (["sweep"], "Missing from farsighter sweep"),
+        (["sweep"], "missing FILE: The sweep file. (required)"),
+        (["plot"], "missing RUN_DIR: Run directory written by"),
     ],
 )
 def test_flags_tyro_cannot_read_are_one_line_exit_2(
@@ -146,6 +147,21 @@ def test_flags_tyro_cannot_read_are_one_line_exit_2(
     assert needle in lines[0] and lines[0].endswith(
         f"{' '.join(args[: 2 if args[0] == 'inspect' else 1])} --help lists the flags"
     ), err
+
+
+def test_a_reader_that_leaves_early_ends_the_output_quietly(tmp_path: Path) -> None:
+    """`farsighter presets | head -1`: the pipe closes before the listing is written; exit
+    141 (128 + SIGPIPE) and nothing on stderr, not a BrokenPipeError traceback."""
+    proc = subprocess.Popen(
+        [sys.executable, "-m", "farsighter", "presets", "--algo", "farsighter"],
+        cwd=tmp_path,
+        stdout=subprocess.PIPE,
+        stderr=subprocess.PIPE,
+    )
+    assert proc.stdout is not None and proc.stderr is not None
+    proc.stdout.close()  # before the import has finished: the first write finds no reader
+    assert proc.wait(timeout=300) == 141
+    assert proc.stderr.read() == b""
 
 
 def test_run_dir_that_cannot_be_created_is_one_line_exit_2(tmp_path: Path) -> None:
