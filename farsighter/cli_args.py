@@ -3,22 +3,55 @@
 tyro answers an unknown flag, a bad value or a missing one with a framed message of several
 lines and exit 2. :func:`parse_flags` raises that message as one :class:`ConfigError` line instead
 (what was wrong, what is accepted, the flag it may have meant), which the CLI prints as
-``farsighter: error: ...`` with exit 2, as it does every other bad input.
+``farsighter: error: ...`` with exit 2, as it does every other bad input. Integer flags take
+integral scientific notation as well (``--total-steps 1e6``).
 """
 
 from __future__ import annotations
 
 import contextlib
 import io
+import math
 import sys
 from collections.abc import Sequence
 from typing import Any, TypeVar
 
 import tyro
+from tyro.constructors import ConstructorRegistry, PrimitiveConstructorSpec, PrimitiveTypeInfo
 
 from farsighter.errors import ConfigError
 
 T = TypeVar("T")
+INTEGERS = ConstructorRegistry()
+"""Integer flags also read as integral scientific notation (``--total-steps 1e6``)."""
+
+
+def read_int(text: str) -> int:
+    """``"100000"`` or ``"1e5"`` as 100000; anything else (``"1.5"``, ``"many"``) refused."""
+    try:
+        return int(text)
+    except ValueError:
+        pass
+    try:
+        value = float(text)
+    except ValueError:
+        value = math.nan
+    if not value.is_integer():
+        raise ValueError(f"{text!r} is not an integer")
+    return int(value)
+
+
+@INTEGERS.primitive_rule
+def _integers(info: PrimitiveTypeInfo) -> PrimitiveConstructorSpec[int] | None:
+    if info.type is not int:
+        return None
+    return PrimitiveConstructorSpec(
+        nargs=1,
+        metavar="INT",
+        instance_from_str=lambda args: read_int(args[0]),
+        is_instance=lambda x: isinstance(x, int) and not isinstance(x, bool),
+        str_from_instance=lambda x: [str(x)],
+    )
 
 
 def parse_flags(cls: type[T], argv: Sequence[str], prog: str, **kwargs: Any) -> Any:
@@ -27,11 +60,11 @@ def parse_flags(cls: type[T], argv: Sequence[str], prog: str, **kwargs: Any) -> 
     line. ``--help`` prints as tyro prints it."""
     args = list(argv)
     if "-h" in args or "--help" in args:
-        return tyro.cli(cls, args=args, prog=prog, **kwargs)
+        return tyro.cli(cls, args=args, prog=prog, registry=INTEGERS, **kwargs)
     captured = io.StringIO()
     try:
         with contextlib.redirect_stderr(captured):
-            value = tyro.cli(cls, args=args, prog=prog, **kwargs)
+            value = tyro.cli(cls, args=args, prog=prog, registry=INTEGERS, **kwargs)
     except SystemExit as exc:
         if exc.code in (0, None):
             raise

@@ -123,7 +123,7 @@ def test_bad_input_is_one_line_exit_2(tmp_path: Path, args: list[str], needle: s
             "Unrecognized options: --totl-steps, 5; did you mean --total-steps?",
         ),
         (["train", "--optimizer", "sgd"], "Expected one of ('rmsprop', 'adam')"),
-        (["train", "--seed", "1.5"], "'1.5' (expected --seed INT)"),
+        (["train", "--seed", "1.5"], "'1.5' is not an integer (expected --seed INT)"),
         (["train", "--algo", "ddqn", "--lr"], "Missing value for argument '--lr'"),
         (["train", "--seeds", "1", "2", "--num-envs", "x"], "(expected --num-envs INT)"),
         (["suite", "--sett", "all"], "did you mean --set?"),
@@ -147,6 +147,14 @@ def test_flags_tyro_cannot_read_are_one_line_exit_2(
     assert needle in lines[0] and lines[0].endswith(
         f"{' '.join(args[: 2 if args[0] == 'inspect' else 1])} --help lists the flags"
     ), err
+
+
+def test_integer_flags_take_integral_scientific_notation() -> None:
+    from farsighter.cli import train_config
+
+    cfg = train_config(["--total-steps", "2e3", "--hidden-sizes", "32", "1e2", "--k", "5"])
+    assert (cfg.total_steps, cfg.hidden_sizes, cfg.k) == (2000, (32, 100), 5)
+    assert all(type(v) is int for v in (cfg.total_steps, *cfg.hidden_sizes, cfg.k))
 
 
 def test_a_reader_that_leaves_early_ends_the_output_quietly(tmp_path: Path) -> None:
