@@ -9,7 +9,7 @@ import math
 
 from farsighter import algorithms
 from farsighter.config.field_types import OPEN_CHOICES, field_value, leaf_fields
-from farsighter.config.fields import Config
+from farsighter.config.fields import Config, env_kwargs_dict
 from farsighter.config.presets import flat_fields, is_atari_id
 from farsighter.errors import ConfigError
 
@@ -30,6 +30,14 @@ def validate(cfg: Config) -> None:
     for name, value in flat_fields(cfg):  # config.json is strict JSON: no NaN or Infinity
         if isinstance(value, float) and not math.isfinite(value):
             raise ConfigError(f"{name} must be a finite number (got {value})")
+
+
+ALE_SET = {
+    "frameskip": "atari.frame_skip",
+    "repeat_action_probability": "atari.repeat_action_probability",
+    "max_num_frames_per_episode": "atari.max_frames_per_episode",
+}
+"""An ALE game's keywords of gymnasium.make that the atari section sets."""
 
 
 def _check_types(cfg: Config) -> None:
@@ -98,5 +106,15 @@ def _algorithm_checks(cfg: Config, spec: algorithms.Algorithm) -> list[tuple[boo
             not (cfg.max_episode_steps and is_atari_id(cfg.env)),
             "max_episode_steps is for non-ALE ids; an ALE game's episodes are capped by "
             "atari.max_frames_per_episode (in frames)",
+        ),
+        (
+            not (is_atari_id(cfg.env) and set(env_kwargs_dict(cfg.env_kwargs)) & set(ALE_SET)),
+            f"env_kwargs cannot set an ALE game's {', '.join(ALE_SET)}: "
+            f"{', '.join(ALE_SET.values())} set them",
+        ),
+        (
+            not (cfg.env_kwargs and cfg.atari.backend == "envpool"),
+            "env_kwargs go to gymnasium.make, and atari.backend envpool makes its games itself; "
+            "use atari.backend gymnasium (or auto, which takes it when env_kwargs are given)",
         ),
     ]

@@ -21,8 +21,9 @@ PASS_AN_ID = (
 
 def env_id_of(env: Any) -> str:
     """``env`` itself when it is an id; for an environment object its ``spec.id``, refused (one
-    line) where the id would not make the same environment again: none registered, other
-    constructor arguments or episode limit, or wrappers around it."""
+    line) where the id and its constructor arguments (:func:`constructor_kwargs`, which a config
+    keeps as ``env_kwargs``) would not make the same environment again: none registered, another
+    episode limit, or wrappers around it."""
     if isinstance(env, str):
         return env
     if not (callable(getattr(env, "step", None)) and callable(getattr(env, "reset", None))):
@@ -37,17 +38,6 @@ def env_id_of(env: Any) -> str:
     if spec is None or spec.id not in gym.registry:
         raise ConfigError(f"this {name} environment has no registered Gymnasium id; {PASS_AN_ID}")
     registered, made = gym.spec(spec.id), f"this {spec.id} environment was made"
-    args = sorted(
-        key
-        for key in set(spec.kwargs) | set(registered.kwargs)
-        if key != "render_mode" and spec.kwargs.get(key) != registered.kwargs.get(key)
-    )
-    if args:
-        raise ConfigError(
-            f"{made} with arguments its id does not carry ({', '.join(args)}); register an id "
-            "that does (gymnasium.register(id='MyEnv-v0', entry_point=..., kwargs={...})) and "
-            "pass that id"
-        )
     steps, limit = spec.max_episode_steps, registered.max_episode_steps
     if steps != limit and steps is None:  # unwrapped, say
         raise ConfigError(
@@ -67,6 +57,20 @@ def env_id_of(env: Any) -> str:
     return str(spec.id)
 
 
+def constructor_kwargs(env: Any) -> dict[str, Any]:
+    """The arguments an environment made by gymnasium.make was given beyond its id's (its
+    ``env_kwargs``; ``render_mode`` aside, which each use chooses)."""
+    import gymnasium as gym
+
+    spec, registered = env.spec, gym.spec(env.spec.id)
+    return {
+        key: value
+        for key, value in spec.kwargs.items()
+        if key != "render_mode"
+        and (key not in registered.kwargs or registered.kwargs[key] != value)
+    }
+
+
 def make_config(
     algo: str = "ddqn",
     env: str | gym.Env[Any, Any] = "CartPole-v1",
@@ -81,4 +85,12 @@ def make_config(
     dict as ``{"blr.prior_std": ...}`` via ``**{"blr.prior_std": 0.1}``. The runtime section's
     fields also go by their plain names (``device="cpu"``, ``torch_threads=1``), as on the
     command line."""
-    return presets.make_config(algo, env_id_of(env), preset, **overrides)
+    env_id = env_id_of(env)
+    if not isinstance(env, str) and constructor_kwargs(env):  # made with arguments: they travel
+        if "env_kwargs" in overrides:
+            raise ConfigError(
+                f"env_kwargs given twice: the {env_id} environment was made with "
+                f"{constructor_kwargs(env)}; pass its id with env_kwargs, or the environment"
+            )
+        overrides = {**overrides, "env_kwargs": constructor_kwargs(env)}
+    return presets.make_config(algo, env_id, preset, **overrides)

@@ -9,6 +9,7 @@ conversions that lose nothing (a list for a tuple, ``1e5`` for an integer, YAML 
 
 from __future__ import annotations
 
+import ast
 import dataclasses
 import functools
 import typing
@@ -71,6 +72,15 @@ def field_value(
     if origin is Literal:
         named = typing.get_args(hint)
         return value, "" if value in named else "one of " + ", ".join(map(str, named))
+    if origin is tuple and typing.get_args(hint)[0] is str:  # env_kwargs: NAME=VALUE items
+        if convert and isinstance(value, dict):  # {"is_slippery": False}
+            if not all(_literal(v) for v in value.values()):
+                return value, "a dict of Python literals (numbers, strings, bools, lists, None)"
+            value = tuple(f"{name}={v!r}" for name, v in value.items())
+        kinds = (list, tuple) if convert else (tuple,)
+        if not isinstance(value, kinds) or not all(isinstance(v, str) for v in value):
+            return value, "a list of strings" + (" or a dict" if convert else "")
+        return tuple(value), ""
     if origin is tuple and typing.get_args(hint)[0] is int:  # hidden sizes
         kinds = (list, tuple) if convert else (tuple,)
         items = list(value) if isinstance(value, kinds) else None
@@ -80,3 +90,11 @@ def field_value(
             return value, "a list of integers" if convert else "a tuple of integers"
         return tuple(items), ""
     return value, ""
+
+
+def _literal(value: Any) -> bool:
+    """Whether ``repr(value)`` reads back as ``value`` (``ast.literal_eval``)."""
+    try:
+        return bool(ast.literal_eval(repr(value)) == value)
+    except (ValueError, SyntaxError):
+        return False

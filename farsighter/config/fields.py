@@ -8,9 +8,10 @@ from this module."""
 
 from __future__ import annotations
 
+import ast
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Annotated, Literal
+from typing import Annotated, Any, Literal
 
 import tyro
 
@@ -25,6 +26,40 @@ from farsighter.config.fields_sections import (
 
 KTarget = Literal["k", "max", "max-mean", "cut"]
 """The values of ``Config.k_target``."""
+RESERVED_ENV_KWARGS = {
+    "render_mode": "each use chooses it (training, evaluation, video)",
+    "max_episode_steps": "the field max_episode_steps sets it",
+}
+"""gymnasium.make's keywords that ``Config.env_kwargs`` leaves to the library, and why."""
+
+
+def env_kwargs_dict(items: tuple[str, ...]) -> dict[str, Any]:
+    """``Config.env_kwargs`` as gymnasium.make's keywords: each VALUE as the Python literal it
+    reads as (False, 8, 0.5, 'x', [1, 2]), else as its text (``map_name=8x8``)."""
+    out: dict[str, Any] = {}
+    for item in items:
+        name, _, text = item.partition("=")
+        try:
+            out[name.strip()] = ast.literal_eval(text.strip())
+        except (ValueError, SyntaxError):
+            out[name.strip()] = text.strip()
+    return out
+
+
+def env_kwargs_problem(items: tuple[str, ...]) -> str:
+    """What is wrong with ``Config.env_kwargs`` ('' when nothing)."""
+    names: list[str] = []
+    for item in items:
+        name, equals, _ = item.partition("=")
+        name = name.strip()
+        if not equals or not name.isidentifier():
+            return f"env_kwargs takes NAME=VALUE items such as is_slippery=False (got {item!r})"
+        if name in RESERVED_ENV_KWARGS:
+            return f"env_kwargs cannot set {name}: {RESERVED_ENV_KWARGS[name]}"
+        if name in names:
+            return f"env_kwargs sets {name} twice"
+        names.append(name)
+    return ""
 
 
 @dataclass(frozen=True)
@@ -57,6 +92,10 @@ class Config:
     environment's own. A task registered without one (CliffWalking-v1) otherwise runs each
     episode until the task itself ends it, which an agent that has not yet learned the way may
     never do. Not for ALE ids (atari.max_frames_per_episode caps those)."""
+    env_kwargs: tuple[str, ...] = ()
+    """Arguments of the environment's constructor, ``NAME=VALUE`` each (``is_slippery=False
+    map_name=8x8``), given to gymnasium.make for training and evaluation; a VALUE that reads as
+    a Python literal (False, 8, 0.5, 'x', [1, 2]) is that value, any other is its text."""
 
     # ----- learning (paper Table 1 unless noted) -----
     optimizer: Literal["rmsprop", "adam"] = "rmsprop"
@@ -163,7 +202,9 @@ class Config:
         """(holds, what was wrong and what is accepted) for each of the run's own fields; each
         section checks its own (``checks`` beside its fields), and farsighter.config.checks
         what depends on the algorithm."""
+        kwargs_problem = env_kwargs_problem(self.env_kwargs)
         return [
+            (not kwargs_problem, kwargs_problem),
             (self.k >= 1, f"k must be an integer >= 1 (got {self.k})"),
             (self.lr > 0, f"lr must be > 0 (got {self.lr})"),
             (self.buffer_size > 0, f"buffer_size must be > 0 (got {self.buffer_size})"),

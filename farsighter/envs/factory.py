@@ -21,6 +21,7 @@ import numpy as np
 
 from farsighter import algorithms
 from farsighter.config import Config, is_atari_id
+from farsighter.config.fields import env_kwargs_dict
 from farsighter.envs.chain import register_chain
 from farsighter.envs.deep_sea import register_deep_sea
 from farsighter.envs.minatar import MinAtarChannelsFirst, is_minatar_id, register_minatar
@@ -104,7 +105,7 @@ def _make_base(env_id: str, cfg: Config, render_mode: str | None) -> gym.Env:
     _register_robotics(env_id)
     _register_minigrid(env_id)
     register_minatar(env_id)
-    kwargs: dict[str, Any] = {}
+    kwargs: dict[str, Any] = env_kwargs_dict(cfg.env_kwargs)
     if render_mode is not None:
         kwargs["render_mode"] = render_mode
     if is_atari_id(env_id):
@@ -237,6 +238,8 @@ def _use_envpool(cfg: Config) -> bool:
     """auto: envpool when installed, the game is there and noop_max >= 1; an explicit envpool
     that cannot serve the game fails with one line in :func:`make_envpool_atari`."""
     if cfg.atari.backend == "auto":
+        if cfg.env_kwargs:  # constructor arguments are gymnasium.make's
+            return False
         from farsighter.envs.envpool_vec import envpool_supports
 
         return envpool_supports(cfg.env, cfg.atari.noop_max)

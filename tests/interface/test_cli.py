@@ -98,6 +98,8 @@ def test_train_eval_and_presets(tmp_path: Path) -> None:
         (["--eval-max-steps", "0"], "eval_max_steps must be >= 1 (got 0)"),
         (["--log-every", "0"], "log_every must be >= 1 (got 0)"),
         (["--max-episode-steps", "-1"], "max_episode_steps must be >= 0"),
+        (["--env-kwargs", "slippery"], "env_kwargs takes NAME=VALUE items"),
+        (["--env-kwargs", "render_mode=human"], "env_kwargs cannot set render_mode"),
         (
             ["--env", "ALE/Pong-v5", "--max-episode-steps", "100"],
             "max_episode_steps is for non-ALE",
@@ -155,6 +157,16 @@ def test_integer_flags_take_integral_scientific_notation() -> None:
     cfg = train_config(["--total-steps", "2e3", "--hidden-sizes", "32", "1e2", "--k", "5"])
     assert (cfg.total_steps, cfg.hidden_sizes, cfg.k) == (2000, (32, 100), 5)
     assert all(type(v) is int for v in (cfg.total_steps, *cfg.hidden_sizes, cfg.k))
+
+
+def test_env_kwargs_from_the_command_line() -> None:
+    from farsighter.cli import train_config
+    from farsighter.envs import make_env
+
+    argv = ["--env", "FrozenLake-v1", "--env-kwargs", "is_slippery=False", "map_name=8x8"]
+    cfg = train_config(argv)
+    assert cfg.env_kwargs == ("is_slippery=False", "map_name=8x8")
+    assert make_env(cfg, seed=0, training=True).observation_space.shape == (64,)
 
 
 def test_a_reader_that_leaves_early_ends_the_output_quietly(tmp_path: Path) -> None:

@@ -16,6 +16,7 @@ from gymnasium.envs.classic_control.cartpole import CartPoleEnv
 
 import farsighter
 from farsighter.config import make_config
+from farsighter.envs import make_env
 
 ROOT = Path(__file__).resolve().parents[2]
 TINY: dict[str, Any] = {
@@ -36,12 +37,29 @@ def test_make_config_takes_an_environment_made_from_a_registered_id() -> None:
     assert cfg.env == "CartPole-v1" and cfg == make_config("farsighter", "CartPole-v1", "cartpole")
 
 
+def test_an_environment_made_with_arguments_keeps_them_as_env_kwargs() -> None:
+    """gymnasium.make's arguments travel with the config (env_kwargs): every environment of the
+    run, training and evaluation, is the one given, here an 8x8 lake without slipping."""
+    lake = gym.make("FrozenLake-v1", is_slippery=False, map_name="8x8")
+    cfg = make_config("farsighter", lake)
+    assert cfg.env == "FrozenLake-v1"
+    assert sorted(cfg.env_kwargs) == ["is_slippery=False", "map_name='8x8'"]
+    assert cfg == make_config("farsighter", "FrozenLake-v1", env_kwargs=cfg.env_kwargs)
+    for training in (True, False):
+        env = make_env(cfg, seed=0, training=training)
+        assert env.observation_space.shape == (64,)  # one-hot over 8 x 8 cells
+        env.reset(seed=0)
+        # without slipping, "right" (2) moves one cell right, every time
+        assert np.argmax(env.step(2)[0]) == 1 and np.argmax(env.step(2)[0]) == 2
+    with pytest.raises(farsighter.FarsighterError, match="^env_kwargs given twice"):
+        make_config("farsighter", lake, env_kwargs={"map_name": "4x4"})
+
+
 @pytest.mark.parametrize(
     ("make_env", "needle"),
     [
         (CartPoleEnv, "this CartPoleEnv environment has no registered Gymnasium id; pass an id"),
         (lambda: gym.make("CartPole-v1").unwrapped, "without its id's time limit (500 steps)"),
-        (lambda: gym.make("FrozenLake-v1", is_slippery=False), "arguments its id does not carry"),
         (lambda: gym.make("CartPole-v1", max_episode_steps=50), "max_episode_steps=50"),
         (lambda: gym.wrappers.TimeAwareObservation(gym.make("CartPole-v1")), "wrappers"),
         (lambda: 3, "env must be a Gymnasium environment id"),
