@@ -121,7 +121,7 @@ def test_plot_only_takes_no_other_flag(tmp_path: Path, capsys: pytest.CaptureFix
 
 def test_a_bad_value_is_a_usage_error(capsys: pytest.CaptureFixture[str]) -> None:
     for line, needle in (
-        ("--workers many", "Error parsing --workers: invalid literal for int()"),
+        ("--workers many", "Error parsing --workers: 'many' is not an integer"),
         ("--no-such-flag", "Unrecognized options: --no-such-flag"),
     ):
         assert main(["maze", *line.split()]) == 2
