@@ -202,6 +202,22 @@ def test_yaml_exponent_strings_are_numbers(tmp_path: Path) -> None:
     assert trial.config("r").lr == 0.0001 and trial.name == "cartpole-v1/ddqn__lr-0-0001__s1"
 
 
+def test_environment_arguments_and_integral_floats(tmp_path: Path) -> None:
+    """env_kwargs swept as lists of NAME=VALUE items; TOML's 1e3 for an integer field."""
+    text = (
+        'name = "lake"\n[grid]\nagent = ["ddqn"]\nenv = ["FrozenLake-v1"]\nseed = [1]\n'
+        'env_kwargs = [["is_slippery=False"], ["is_slippery=True", "map_name=8x8"]]\n'
+        "[set]\ntotal_steps = 1e3\n"
+    )
+    trials = load_spec(_write(tmp_path, text)).trials
+    assert [t.config("r").env_kwargs for t in trials] == [
+        ("is_slippery=False",),
+        ("is_slippery=True", "map_name=8x8"),
+    ]
+    assert all(type(t.config("r").total_steps) is int for t in trials)
+    assert trials[1].name == "frozenlake-v1/ddqn__env-kwargs-is-slippery-true-map-name-8x8__s1"
+
+
 def test_parse_spec_takes_a_mapping() -> None:
     data = {"name": "m", "grid": {"agent": ["ddqn"], "env": ["CartPole-v1"], "seed": [1, 2]}}
     spec = parse_spec(data, "inline")
