@@ -138,7 +138,11 @@ def _make_base(env_id: str, cfg: Config, render_mode: str | None) -> gym.Env:
             "farsighter/BridgeMaze-v0, or module:EnvId)"
         ) from None
     except Exception as exc:  # an environment constructor failing is a user-facing problem too
-        raise EnvError(f"cannot make environment '{env_id}': {_first_line(exc)}") from None
+        given = f" with {' '.join(cfg.env_kwargs)}" if cfg.env_kwargs else ""
+        why = _first_line(exc)
+        if isinstance(exc, KeyError):  # str(KeyError('9x9')) is only "'9x9'"
+            why = f"no entry {why}"
+        raise EnvError(f"cannot make environment '{env_id}'{given}: {why}") from None
 
 
 def make_env(

@@ -101,6 +101,10 @@ def test_train_eval_and_presets(tmp_path: Path) -> None:
         (["--env-kwargs", "slippery"], "env_kwargs takes NAME=VALUE items"),
         (["--env-kwargs", "render_mode=human"], "env_kwargs cannot set render_mode"),
         (
+            ["--env", "FrozenLake-v1", "--env-kwargs", "map_name=9x9"],
+            "cannot make environment 'FrozenLake-v1' with map_name=9x9: no entry '9x9'",
+        ),
+        (
             ["--env", "ALE/Pong-v5", "--max-episode-steps", "100"],
             "max_episode_steps is for non-ALE",
         ),
