@@ -18,6 +18,7 @@ import tyro
 from farsighter import jsonio
 from farsighter.cli_args import parse_flags
 from farsighter.config import Config, load_config, make_config, resolve_preset_name
+from farsighter.config.fields import env_kwargs_problem
 from farsighter.errors import ConfigError, FarsighterError, Interrupted, RunDirError
 from farsighter.rundir import CONFIG_FILE, check_same_run
 
@@ -87,6 +88,9 @@ class EvalArgs:
     video: Annotated[str, tyro.conf.arg(metavar="DIR")] = ""
     """Record every episode into DIR as an .mp4 (gymnasium's RecordVideo; needs moviepy: pip
     install 'farsighter[video]')."""
+    env_kwargs: Annotated[tuple[str, ...] | None, tyro.conf.arg(metavar="NAME=VALUE ...")] = None
+    """The environment's constructor arguments for this evaluation instead of the run's own
+    (``is_slippery=True``: how a policy trained without slipping fares with it)."""
 
 
 RENDER_MODES = ("human", "rgb_array")
@@ -215,6 +219,17 @@ def cmd_eval(argv: Sequence[str]) -> int:
     if args.video:
         check_video()  # without moviepy: one line naming the extra, before anything is loaded
     policy = load_agent(args.run_dir, device=args.device)
+    if args.env_kwargs is not None:  # the run's environment made otherwise
+        problem = env_kwargs_problem(args.env_kwargs)
+        if problem:
+            raise ConfigError(problem)
+        policy.config = dataclasses.replace(policy.config, env_kwargs=args.env_kwargs)
+        space = policy.make_env(seed=args.seed).observation_space
+        if space != policy.observation_space:
+            raise ConfigError(
+                f"with --env-kwargs {' '.join(args.env_kwargs)} the environment observes "
+                f"{space}; the run's agent takes {policy.observation_space}"
+            )
     cfg = policy.config
     if args.video or args.render:  # one environment that renders, its episodes in turn
         env = policy.make_env(
@@ -233,6 +248,7 @@ def cmd_eval(argv: Sequence[str]) -> int:
     returns = result.returns
     report = {
         "run_dir": args.run_dir,
+        "env_kwargs": list(cfg.env_kwargs),
         "episodes": args.episodes,
         "mean_return": float(np.mean(returns)),
         "std_return": float(np.std(returns)),

@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import dataclasses
 import json
 import subprocess
 import sys
@@ -171,6 +172,32 @@ def test_env_kwargs_from_the_command_line() -> None:
     cfg = train_config(argv)
     assert cfg.env_kwargs == ("is_slippery=False", "map_name=8x8")
     assert make_env(cfg, seed=0, training=True).observation_space.shape == (64,)
+
+
+def test_eval_on_the_runs_environment_made_otherwise(
+    tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    """farsighter eval --env-kwargs: the run's environment with other constructor arguments (the
+    lake with slipping, for a run trained without); arguments that change what the agent
+    observes are refused in one line."""
+    from farsighter import make_config, train
+    from farsighter.cli import main
+
+    run = tmp_path / "lake"
+    cfg = make_config("ddqn", "FrozenLake-v1", env_kwargs={"is_slippery": False})
+    train(dataclasses.replace(cfg, total_steps=300, learning_starts=100, run_dir=str(run)))
+    capsys.readouterr()
+    for given, kwargs in ([], ["is_slippery=False"]), (["is_slippery=True"], ["is_slippery=True"]):
+        flags = ["--env-kwargs", *given] if given else []
+        assert main(["eval", str(run), "--episodes", "2", *flags]) == 0
+        assert json.loads(capsys.readouterr().out)["env_kwargs"] == kwargs
+    assert main(["eval", str(run), "--env-kwargs", "map_name=8x8"]) == 2
+    err = capsys.readouterr().err.strip()
+    assert err.startswith(
+        "farsighter: error: with --env-kwargs map_name=8x8 the environment "
+        "observes Box(0.0, 1.0, (64,), float32); the run's agent takes"
+    )
+    assert len(err.splitlines()) == 1
 
 
 def test_a_reader_that_leaves_early_ends_the_output_quietly(tmp_path: Path) -> None:
