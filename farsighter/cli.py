@@ -17,8 +17,7 @@ import tyro
 
 from farsighter import jsonio
 from farsighter.cli_args import parse_flags
-from farsighter.config import Config, load_config, make_config, resolve_preset_name
-from farsighter.config.fields import env_kwargs_problem
+from farsighter.config import Config, load_config, make_config, resolve_preset_name, validate
 from farsighter.errors import ConfigError, FarsighterError, Interrupted, RunDirError
 from farsighter.rundir import CONFIG_FILE, check_same_run
 
@@ -220,10 +219,8 @@ def cmd_eval(argv: Sequence[str]) -> int:
         check_video()  # without moviepy: one line naming the extra, before anything is loaded
     policy = load_agent(args.run_dir, device=args.device)
     if args.env_kwargs is not None:  # the run's environment made otherwise
-        problem = env_kwargs_problem(args.env_kwargs)
-        if problem:
-            raise ConfigError(problem)
         policy.config = dataclasses.replace(policy.config, env_kwargs=args.env_kwargs)
+        validate(policy.config)
         space = policy.make_env(seed=args.seed).observation_space
         if space != policy.observation_space:
             raise ConfigError(

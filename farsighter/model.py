@@ -30,6 +30,7 @@ import torch
 
 from farsighter import algorithms
 from farsighter.config import Config, load_config, make_config, save_config, validate
+from farsighter.config.field_types import field_value
 from farsighter.errors import ConfigError, EnvError, RunDirError
 from farsighter.policy_file import policy_state
 from farsighter.rundir import CHECKPOINT_FILE, CONFIG_FILE, SUMMARY_FILE
@@ -72,20 +73,20 @@ class Model:
     def learn(self, total_steps: int | float, progress: bool = True) -> Model:
         """Train for ``total_steps`` more environment steps (the first call from scratch, each
         later one resuming the run where it stopped); returns the model."""
-        if isinstance(total_steps, float) and total_steps.is_integer():
-            total_steps = int(total_steps)  # learn(1e5)
-        if not isinstance(total_steps, int) or isinstance(total_steps, bool) or total_steps < 1:
+        value, want = field_value("total_steps", total_steps)  # learn(1e5) is learn(100000)
+        if want or value < 1:
             raise ConfigError(f"total_steps must be an integer >= 1 (got {total_steps!r})")
+        steps: int = value
         if self.num_steps == 0:
             path = self._fresh_run_dir()
             cfg = dataclasses.replace(
-                self.config, total_steps=total_steps, progress=progress, run_dir=str(path)
+                self.config, total_steps=steps, progress=progress, run_dir=str(path)
             )
         else:
             path = self._resumable_run_dir()
             cfg = dataclasses.replace(
                 self.config,
-                total_steps=self.num_steps + total_steps,
+                total_steps=self.num_steps + steps,
                 progress=progress,
                 run_dir=str(path),
                 resume=True,

@@ -23,10 +23,7 @@ def validate(cfg: Config) -> None:
         for ok, message in checks:
             if not ok:
                 raise ConfigError(message)
-    for name, value in flat_fields(cfg):  # named choices no section's check above names
-        want = "" if name in OPEN_CHOICES else field_value(name, value, convert=False)[1]
-        if want:
-            raise ConfigError(f"{name} must be {want} (got {value!r})")
+    _check_types(cfg, choices=True)  # named choices no section's check above names
     for name, value in flat_fields(cfg):  # config.json is strict JSON: no NaN or Infinity
         if isinstance(value, float) and not math.isfinite(value):
             raise ConfigError(f"{name} must be a finite number (got {value})")
@@ -40,16 +37,17 @@ ALE_SET = {
 """An ALE game's keywords of gymnasium.make that the atari section sets."""
 
 
-def _check_types(cfg: Config) -> None:
+def _check_types(cfg: Config, choices: bool = False) -> None:
     """Every field holds a value of its type (a config built with ``dataclasses.replace`` or by
-    hand is checked as ``make_config`` checks keywords), before a check compares it."""
-    leaves, sections = leaf_fields()
-    for name, cls in sections.items():
+    hand is checked as ``make_config`` checks keywords), before a check compares it; with
+    ``choices``, a field of named choices one of them (but a registry's, ``OPEN_CHOICES``)."""
+    for name, cls in leaf_fields()[1].items():
         if not isinstance(getattr(cfg, name), cls):
             got = getattr(cfg, name)
             raise ConfigError(f"{name} must be a {cls.__name__} (got {got!r})")
     for name, value in flat_fields(cfg):
-        want = field_value(name, value, convert=False, choices=False)[1]
+        named = choices and name not in OPEN_CHOICES
+        want = field_value(name, value, convert=False, choices=named)[1]
         if want:
             raise ConfigError(f"{name} must be {want} (got {value!r})")
 

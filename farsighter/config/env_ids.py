@@ -86,11 +86,12 @@ def make_config(
     fields also go by their plain names (``device="cpu"``, ``torch_threads=1``), as on the
     command line."""
     env_id = env_id_of(env)
-    if not isinstance(env, str) and constructor_kwargs(env):  # made with arguments: they travel
+    made_with = {} if isinstance(env, str) else constructor_kwargs(env)
+    if made_with:  # an environment made with arguments: they travel with the config
         if "env_kwargs" in overrides:
             raise ConfigError(
-                f"env_kwargs given twice: the {env_id} environment was made with "
-                f"{constructor_kwargs(env)}; pass its id with env_kwargs, or the environment"
+                f"env_kwargs given twice: the {env_id} environment was made with {made_with}; "
+                "pass its id with env_kwargs, or the environment"
             )
-        overrides = {**overrides, "env_kwargs": constructor_kwargs(env)}
+        overrides = {**overrides, "env_kwargs": made_with}
     return presets.make_config(algo, env_id, preset, **overrides)
