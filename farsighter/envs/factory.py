@@ -22,6 +22,7 @@ import numpy as np
 from farsighter import algorithms
 from farsighter.config import Config, is_atari_id
 from farsighter.config.fields import env_kwargs_dict
+from farsighter.envs.bsuite_env import register_bsuite
 from farsighter.envs.chain import register_chain
 from farsighter.envs.deep_sea import register_deep_sea
 from farsighter.envs.minatar import MinAtarChannelsFirst, is_minatar_id, register_minatar
@@ -53,11 +54,12 @@ BOX2D_EXTRA = "install the Box2D extra: pip install 'farsighter[box2d]'"
 
 def _register_builtin(env_id: str) -> None:
     # Importing registers ``farsighter/BridgeMaze-v0`` and friends (idempotent); a chain id
-    # ``farsighter/Chain<L>-v0`` or a deep sea id is registered when first named.
+    # ``farsighter/Chain<L>-v0``, a deep sea id or a bsuite id is registered when first named.
     importlib.import_module("farsighter.envs.maze")
     importlib.import_module("farsighter.envs.tabular")
     register_chain(env_id)
     register_deep_sea(env_id)
+    register_bsuite(env_id)
 
 
 def is_minigrid_id(env_id: str) -> bool:
