@@ -8,9 +8,10 @@ dynamics, rewards and settings are bsuite's.
 - An episode that ends with discount 0 is terminated, one that ends otherwise truncated (a
   k-step target bootstraps from it).
 - ``reset(seed=s)`` builds the environment anew with ``seed=s`` where bsuite's constructor takes a
-  seed the setting leaves open (every experiment but bandit, discounting_chain and deep_sea), so
-  that a run is a function of its seed; a setting's ``mapping_seed`` (which arm pays, which chain
-  has the bonus) is the setting's, as in bsuite's sweep.
+  seed the setting leaves open, and otherwise reseeds the environment's own generator where it
+  has one (the stochastic deep sea's noise), so that a run is a function of its seed; a setting's
+  ``mapping_seed`` (which arm pays, which chain has the bonus) is the setting's, as in bsuite's
+  sweep.
 - Constructor arguments (``--env-kwargs chain_length=5``) replace the setting's.
 - The mnist experiments are refused: bsuite downloads MNIST when it makes them.
 """
@@ -85,6 +86,10 @@ class BsuiteEnv(gymnasium.Env[NDArray[np.float32], np.int64]):
         super().reset(seed=seed)
         if seed is not None and self._seeded:
             self._env = self._make(**{**self._kwargs, "seed": seed})
+        elif seed is not None and isinstance(
+            getattr(self._env, "_rng", None), np.random.RandomState
+        ):
+            self._env._rng = np.random.RandomState(seed)  # noqa: SLF001  (stochastic deep sea)
         step = self._env.reset()
         return np.asarray(step.observation, np.float32).ravel(), {}
 

@@ -65,6 +65,18 @@ def test_reset_seeds_the_episodes_and_the_setting_keeps_the_task() -> None:
         ]
         assert paid[index][0] == paid[index][1]
     assert paid[0][0] != paid[1][0]
+    # the stochastic deep sea, whose constructor takes no seed: its noise follows reset's seed
+    sea = make_env(make_config("ddqn", "bsuite/deep_sea_stochastic-0"), seed=0)
+    actions = np.random.default_rng(0).integers(0, 2, size=10)
+
+    def episodes(seed: int) -> bytes:  # five episodes after a reset with ``seed``
+        first = _episode(sea, seed, actions)
+        rest = [_episode(sea, None, actions) for _ in range(4)]
+        return b"".join(o.tobytes() + np.array(r).tobytes() for o, r in [first, *rest])
+
+    runs = [episodes(seed) for seed in (1, 1, 2, 3)]
+    assert runs[0] == runs[1]
+    assert len(set(runs[1:])) > 1
 
 
 def test_constructor_arguments_replace_the_settings() -> None:
