@@ -12,7 +12,7 @@ from __future__ import annotations
 
 from collections.abc import Sequence
 from dataclasses import dataclass
-from typing import Literal
+from typing import Any, Literal
 
 import numpy as np
 
@@ -152,3 +152,10 @@ def verdict(ci: DiffCI, *, higher_is_better: bool = True) -> Verdict:
         if ci.lo > 0.0:
             return "does not hold"
     return "undecided"
+
+
+def fmt(v: Any) -> str:
+    """A number as the tables and the evidence show it (3 significant digits, "n/a" if NaN)."""
+    if isinstance(v, float):
+        return "n/a" if not np.isfinite(v) else f"{v:.3g}" if abs(v) < 1000 else f"{v:.0f}"
+    return str(v)

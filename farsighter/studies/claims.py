@@ -12,7 +12,7 @@ from typing import Any
 
 import numpy as np
 
-from farsighter.stats import DiffCI, Stat, bootstrap_diff, statistic, verdict
+from farsighter.stats import DiffCI, Stat, bootstrap_diff, fmt, statistic, verdict
 
 N_BOOT = 10_000
 CONFIDENCE = 0.95
@@ -45,13 +45,6 @@ class Measure:
     higher_is_better: bool
     stat: Stat = "mean"
     count: bool = False  # a 0/1 indicator: show the groups as solved/seeds
-
-
-def fmt(v: Any) -> str:
-    """A number as the tables and the evidence show it (3 significant digits, "n/a" if NaN)."""
-    if isinstance(v, float):
-        return "n/a" if not np.isfinite(v) else f"{v:.3g}" if abs(v) < 1000 else f"{v:.0f}"
-    return str(v)
 
 
 def _finite(x: Any) -> np.ndarray:

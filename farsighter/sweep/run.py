@@ -35,6 +35,7 @@ from farsighter import jsonio
 from farsighter.cli_args import parse_flags
 from farsighter.errors import FarsighterError
 from farsighter.rundir import CHECKPOINT_FILE, EVAL_FILE, SUMMARY_FILE
+from farsighter.stats import fmt
 from farsighter.sweep.engine import (
     Backend,
     Progress,
@@ -410,7 +411,7 @@ def _report(
     for (name, env), values in groups.items():
         v = np.array(values)
         sd = v.std(ddof=1) if len(v) > 1 else 0.0
-        cells.append([name, env, str(len(v)), f"{v.mean():.2f} ± {sd:.2f}"])
+        cells.append([name, env, str(len(v)), f"{fmt(float(v.mean()))} ± {fmt(float(sd))}"])
     lines.append(markdown_table(["agent", "environment", "seeds", "final return"], cells))
     if agg_md:
         lines += ["", f"## Across environments ({_NORM_TEXT[how]})", "", agg_md.strip()]
