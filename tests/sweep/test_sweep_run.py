@@ -11,9 +11,11 @@ import threading
 import time
 from pathlib import Path
 
+import numpy as np
 import pytest
 
 from farsighter.cli import main as cli_main
+from farsighter.stats import fmt
 from farsighter.sweep import engine
 from farsighter.sweep.engine import Backend
 from farsighter.sweep.run import attempts, attempts_log, run_sweep
@@ -64,6 +66,11 @@ def test_sweep_runs_every_trial_then_skips_finished_ones(
     for name in ("aggregate/aggregate.csv", "aggregate/aggregate.md", "report.md"):
         assert (out / name).stat().st_size > 0
     assert (out / "figures" / "curves.png").stat().st_size > 1000
+    report = (out / "report.md").read_text()
+    for agent in ("ddqn", "farsighter"):  # the table states results.csv's returns, 3 digits
+        returns = np.array([float(r["final_eval_return"]) for r in rows if r["agent"] == agent])
+        cell = f"{fmt(float(returns.mean()))} ± {fmt(float(returns.std(ddof=1)))}"
+        assert f"| {agent} | CartPole-v1 | 2 | {cell} |" in report
 
     def no_run(*args: object, **kwargs: object) -> None:
         raise AssertionError("a finished trial was run again")
