@@ -221,7 +221,8 @@ def cmd_eval(argv: Sequence[str]) -> int:
     if args.env_kwargs is not None:  # the run's environment made otherwise
         policy.config = dataclasses.replace(policy.config, env_kwargs=args.env_kwargs)
         validate(policy.config)
-        space = policy.make_env(seed=args.seed).observation_space
+        with policy.make_env(seed=args.seed) as probe:
+            space = probe.observation_space
         if space != policy.observation_space:
             raise ConfigError(
                 f"with --env-kwargs {' '.join(args.env_kwargs)} the environment observes "

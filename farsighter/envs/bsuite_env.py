@@ -27,10 +27,11 @@ import gymnasium
 import numpy as np
 from numpy.typing import NDArray
 
+from farsighter.envs.deep_sea import BSUITE_EXTRA
+
 __all__ = ["BSUITE_ID", "BsuiteEnv", "register_bsuite"]
 
 BSUITE_ID = re.compile(r"^bsuite/([a-z_]+)-(\d+)$")
-BSUITE_EXTRA = "install the exploration extra: pip install 'farsighter[explore]'"
 
 
 def _constructor(experiment: str) -> Callable[..., Any]:
