@@ -151,10 +151,7 @@ def refresh_posterior(
 ) -> None:
     """Algorithm 1 line 6 (and line 7 with adaptive k) for one posterior: in batch mode a fit
     on the features (``torso``) and regression targets (``targets``) of D tuples of the replay's
-    ``streams`` (:func:`refresh_rows`); in incremental mode from its running statistics.
-    ``blr.scale reward``: the noise floor follows the largest reward the streams hold."""
-    if cfg.blr.scale == "reward":
-        head.floor_scale = max(1.0, replay.largest_reward(streams))
+    ``streams`` (:func:`refresh_rows`); in incremental mode from its running statistics."""
     if cfg.blr.mode == "batch":
         d, k = cfg.blr.posterior_samples, counters.k
         if cfg.blr.posterior_sampling == "uniform":  # the BDQN code: whole buffer, replaced

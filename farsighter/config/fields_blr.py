@@ -33,14 +33,11 @@ class BLRConfig:
     reward is learned from fewer samples) and the posterior narrows faster where the run has
     been, while its width where the run has not been (the prior's) stays as it is. Our
     extension."""
-    scale: Literal["fixed", "residual", "reward"] = "fixed"
+    scale: Literal["fixed", "residual"] = "fixed"
     """fixed: sigma and sigma_eps are the constants above (the paper). residual: at every refresh
     sigma_eps = max(noise_std, RMS residual of the regression targets under the posterior mean)
     and sigma = sigma_eps * prior_std / noise_std, so the posterior follows the scale of the
-    values (noise_std is then a floor and prior_std / noise_std the prior's ratio to it).
-    reward: the same with the floor at noise_std * max(1, the largest |reward| in the seed's
-    replay), so the prior is as wide as the rewards are large (never narrower than configured:
-    small rewards may be a lock's move costs). Our extension."""
+    values (noise_std is then a floor and prior_std / noise_std the prior's ratio to it)."""
     redraw: Literal["step", "k", "every", "episode", "revisit"] = "step"
     """When a fresh Thompson draw z is made, per environment: every step (Algorithm 2), held for k
     steps (the horizon of the k-step target), every `redraw_every` steps, once per episode, or

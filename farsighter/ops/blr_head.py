@@ -16,7 +16,7 @@ import torch
 from farsighter.errors import Diverged
 from farsighter.ops.blr_posterior import _check_stds, all_finite, blr_posterior_factor
 
-SCALES = ("fixed", "residual", "reward")
+SCALES = ("fixed", "residual")
 
 # Largest number of float elements a (rows, A, D) temporary may hold in q_sample / predictive_var;
 # bigger batches are processed in row blocks so memory stays bounded (16 MiB of float32).
@@ -44,9 +44,7 @@ class BLRHead:
             (exponential forgetting of old features / targets). 1 = no forgetting.
         scale: ``fixed`` keeps prior_std and noise_std; ``residual`` re-estimates sigma_eps at
             every refresh as max(noise_std, RMS residual) and sets the prior sigma to
-            sigma_eps * prior_std / noise_std (see the :mod:`farsighter.ops.blr` docstring);
-            ``reward`` does the same with the floor at noise_std * ``floor_scale``, which the
-            agent sets before a refresh (the largest reward magnitude in its replay, at least 1).
+            sigma_eps * prior_std / noise_std (see the :mod:`farsighter.ops.blr` docstring).
         device: where statistics and caches live.
         stats_dtype: dtype of the sufficient statistics and of the exact posterior.
         fit_dim: the features regressed on the targets, the first ``fit_dim`` (None: all). The
@@ -86,8 +84,6 @@ class BLRHead:
         self.scale = scale
         # The configured values: constants (fixed) or the floor and the prior ratio (residual).
         self.noise_floor = float(noise_std)
-        # scale = reward: the floor's factor, set by the agent before each refresh (>= 1)
-        self.floor_scale: float = 1.0
         self.prior_ratio = float(prior_std) / float(noise_std)
         self.num_actions = int(num_actions)
         self.dim = int(dim)
@@ -221,12 +217,11 @@ class BLRHead:
         mean_AD, sqrt_cov_ADD, jitter_A = blr_posterior_factor(
             self.phiphiT_ADD, self.phiy_AD, self.prior_std, self.noise_std
         )
-        if self.scale != "fixed" and float(self.count_A.sum()) > 0:
+        if self.scale == "residual" and float(self.count_A.sum()) > 0:
             # With sigma = ratio * sigma_eps the ridge sigma_eps^2 / sigma^2 is fixed, so the mean
             # does not depend on sigma_eps and Cov_a = sigma_eps^2 (Phi Phi^T + I / ratio^2)^-1:
             # re-estimating sigma_eps rescales the square root, with no second factorisation.
-            floor = self.noise_floor * (self.floor_scale if self.scale == "reward" else 1.0)
-            new_noise = max(floor, math.sqrt(residual_variance(self, mean_AD)))
+            new_noise = max(self.noise_floor, math.sqrt(residual_variance(self, mean_AD)))
             sqrt_cov_ADD = sqrt_cov_ADD * (new_noise / self.noise_std)
             self.noise_std, self.prior_std = new_noise, self.prior_ratio * new_noise
         repaired = int((jitter_A > 0).sum())

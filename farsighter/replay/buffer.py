@@ -132,11 +132,6 @@ class ReplayBuffer:
         """Live rows over all streams (final rows included)."""
         return int(np.minimum(self.count, self.capacity).sum())
 
-    def largest_reward(self, streams: slice = slice(None)) -> float:
-        """The largest reward magnitude held by the live rows of ``streams`` (0 when empty;
-        slots not yet written hold 0)."""
-        return float(np.abs(self.rewards[streams]).max(initial=0.0))
-
     def _frame(self, obs: np.ndarray) -> np.ndarray:
         return obs[-1] if self.frame_stack > 1 else obs
 

@@ -65,64 +65,6 @@ def test_residual_scale_never_goes_below_its_floor() -> None:
     assert head.noise_std == 1.0 and head.prior_std == 1.0
 
 
-def test_reward_scale_lifts_the_floor_to_its_factor_and_keeps_the_mean() -> None:
-    """``scale = reward``: the floor is noise_std x ``floor_scale`` (the prior keeps its ratio);
-    the mean is the residual scale's, the covariance the square of the width's ratio times it;
-    at factor 1 it is the residual scale bit for bit, and a residual above the floor wins."""
-    phi, a, y = _synthetic(0.05)
-    heads = {}
-    for scale, factor in (("residual", 1.0), ("reward", 1.0), ("reward", 40.0)):
-        head = BLRHead(num_actions=2, dim=5, prior_std=2.0, noise_std=1.0, scale=scale)
-        head.floor_scale = factor
-        head.fit(phi, a, y)
-        heads[scale, factor] = head
-    residual, same, wide = heads["residual", 1.0], heads["reward", 1.0], heads["reward", 40.0]
-    assert residual.noise_std == 1.0 and (wide.noise_std, wide.prior_std) == (40.0, 80.0)
-    for x, z in zip(residual.posterior(), same.posterior(), strict=True):
-        assert torch.equal(x, z)
-    (mean_r, cov_r), (mean_w, cov_w) = residual.posterior(), wide.posterior()
-    assert torch.equal(mean_w, mean_r)
-    assert torch.allclose(cov_w, 1600.0 * cov_r, rtol=1e-10, atol=0.0)
-    noisy = BLRHead(num_actions=2, dim=5, prior_std=2.0, noise_std=1.0, scale="reward")
-    noisy.floor_scale = 5.0
-    noisy.fit(*_synthetic(20.0))
-    assert noisy.noise_std == pytest.approx(20.0, rel=0.03)
-
-
-def test_the_agents_reward_scale_is_its_replays_largest_reward(tmp_path: Path) -> None:
-    """The agent sets the floor's factor from the largest reward magnitude its replay holds:
-    one reward of -1,000 among small ones widens the posterior to sigma_eps = 1,000 at the next
-    refresh, on the same statistics and mean as the residual scale."""
-    env = gym.make("CartPole-v1")
-    heads = {}
-    for scale in ("residual", "reward"):
-        cfg = tiny("farsighter", tmp_path / scale, preset="general", blr__scale=scale)
-        agent = build_agent(
-            cfg, env.observation_space, env.action_space, frame_stack=1, device=torch.device("cpu")
-        )
-        rng = np.random.default_rng(0)
-        for t in range(300):
-            end = t % 40 == 39
-            agent.observe(
-                VectorStep(
-                    rng.normal(size=(1, 4)).astype(np.float32),
-                    rng.integers(0, 2, size=1),
-                    np.array([-1000.0 if t == 100 else 0.1 * rng.normal()]),
-                    np.array([end]),
-                    np.array([False]),
-                    [rng.normal(size=4).astype(np.float32)] if end else None,
-                )
-            )
-            agent.learn(t + 1)
-        inner(agent).refresh_posterior()
-        heads[scale] = parts(agent).head
-    residual, reward = heads["residual"], heads["reward"]
-    assert reward.noise_std == 1000.0 and residual.noise_std < 1000.0
-    assert torch.equal(reward.mean_AD, residual.mean_AD)
-    ratio = reward.noise_std / residual.noise_std
-    assert torch.allclose(reward.posterior()[1], ratio**2 * residual.posterior()[1], rtol=1e-9)
-
-
 def test_residual_variance_matches_the_residuals() -> None:
     phi, a, y = _synthetic(2.0, n=500)
     head = BLRHead(num_actions=2, dim=5, prior_std=1.0, noise_std=1.0)
