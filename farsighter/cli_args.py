@@ -68,9 +68,37 @@ def parse_flags(cls: type[T], argv: Sequence[str], prog: str, **kwargs: Any) -> 
     except SystemExit as exc:
         if exc.code in (0, None):
             raise
-        raise ConfigError(one_line(captured.getvalue(), prog)) from None
+        raise ConfigError(
+            bool_value_hint(args, captured.getvalue(), prog) or one_line(captured.getvalue(), prog)
+        ) from None
     sys.stderr.write(captured.getvalue())  # a warning of a parse that succeeded
     return value
+
+
+def bool_value_hint(args: Sequence[str], message: str, prog: str) -> str | None:
+    """For a parse that failed on a switch given a value (``--progress False``: tyro's
+    ``message`` says the value was not recognised): the line that says how switches are
+    written; None otherwise."""
+    listed = [line for line in message.splitlines() if "Unrecognized options:" in line]
+    if not listed:
+        return None
+    unknown = listed[0].split("Unrecognized options:", 1)[1].strip(" │").replace(",", " ").split()
+    pairs = [tuple(a.split("=", 1)) for a in args if a.startswith("--") and "=" in a]
+    pairs += [(a, b) for a, b in zip(args, args[1:], strict=False) if "=" not in a]
+    for flag, value in pairs:
+        if (
+            flag.startswith("--")
+            and value.lower() in ("true", "false")
+            and value in unknown
+            and flag not in unknown
+        ):
+            section, _, name = flag[2:].rpartition(".")
+            off = f"--{section + '.' if section else ''}no-{name}"
+            return (
+                f"{flag} takes no value (got {flag} {value}): write {flag} to turn it on or "
+                f"{off} to turn it off; {prog} --help lists the flags"
+            )
+    return None
 
 
 def one_line(message: str, prog: str) -> str:

@@ -138,6 +138,18 @@ def test_bad_input_is_one_line_exit_2(tmp_path: Path, args: list[str], needle: s
         (["inspect", "action-gaps", "--bogus"], "Unrecognized options: --bogus"),
         (["sweep"], "missing FILE: The sweep file. (required)"),
         (["plot"], "missing RUN_DIR: Run directory written by"),
+        # a switch given a value: how switches are written, not "Unrecognized options: False"
+        (
+            ["train", "--progress", "False"],
+            "--progress takes no value (got --progress False): write --progress to turn it on "
+            "or --no-progress to turn it off",
+        ),
+        (["train", "--progress=false"], "or --no-progress to turn it off"),
+        (["train", "--blr.center-sample", "true"], "or --blr.no-center-sample to turn it off"),
+        (["presets", "--all", "True"], "--all takes no value (got --all True)"),
+        # the same words after a flag that is no switch, or no flag at all, keep tyro's message
+        (["train", "--k", "False"], "'False' is not an integer (expected --k INT)"),
+        (["train", "--bogus", "False"], "Unrecognized options: --bogus, False"),
     ],
 )
 def test_flags_tyro_cannot_read_are_one_line_exit_2(
